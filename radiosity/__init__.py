@@ -1,0 +1,37 @@
+"""radiosity: diffuse global illumination and exact view factors on polygon meshes.
+
+Public API
+----------
+point_to_polygon    -- form factor from differential receivers to a polygon (Lambert)
+polygon_to_polygon  -- area-averaged form factor between two polygons, to a tolerance
+load_scene          -- OBJ + MTL scene cut into patches (Scene)
+bundled_scene       -- path of a scene shipped with the package ("cornell_box", ...)
+solve               -- radiosity solution of a scene (Solution), with presets
+view_factors        -- sparse patch-to-patch view-factor matrix with occlusion
+Scene, Solution, Options, PRESETS
+RadiosityError, SceneError, MemoryBudgetError, RadiosityWarning
+"""
+
+from ._errors import MemoryBudgetError, RadiosityError, RadiosityWarning, SceneError
+from .formfactors import point_to_polygon, polygon_to_polygon
+from .options import PRESETS, Options
+from .scene import Scene, bundled_scene, load_scene
+from .solution import Solution
+from .solve import solve, view_factors
+
+__all__ = [
+    "point_to_polygon",
+    "polygon_to_polygon",
+    "load_scene",
+    "bundled_scene",
+    "solve",
+    "view_factors",
+    "Scene",
+    "Solution",
+    "Options",
+    "PRESETS",
+    "RadiosityError",
+    "SceneError",
+    "MemoryBudgetError",
+    "RadiosityWarning",
+]

@@ -1,0 +1,32 @@
+"""Named tolerances and chunk sizes: every magic number of the kernels lives here."""
+
+from __future__ import annotations
+
+# Relative size below which a cross product or area counts as zero (degenerate edge or face).
+# Relative to the squared edge lengths involved, so it is scale free.
+DEGENERATE_REL = 1e-14
+
+# Relative distance (to scene size) by which ray origins and ends are pulled off surfaces.
+# Embree works in float32 (eps 6e-8); 1e-5 of the scene's diagonal is ~150 ulps, enough to
+# avoid self hits at shared edges yet far below any feature a scene is modelled with.
+RAY_OFFSET_REL = 1e-5
+
+# A receiver closer than this to a source's plane (relative to the source's distance) lies in
+# that plane and sees the source edge-on: its form factor is 0.
+IN_PLANE_REL = 1e-12
+
+# Distance from a face plane, relative to the face size, within which a polygon counts as planar.
+PLANAR_REL = 1e-6
+
+# Pairs of (receiver point, source polygon) evaluated per numpy chunk: bounds temporary memory
+# to roughly CHUNK_PAIRS * 8 edges * 3 * 8 bytes * a handful of temporaries (~150 MB).
+CHUNK_PAIRS = 200_000
+
+# Rays per embree call: large enough to amortise the call, small enough to stay in cache.
+CHUNK_RAYS = 1_000_000
+
+# View factors below this are dropped from the sparse matrix; the dropped mass is reported.
+DROP_FACTOR = 1e-12
+
+# Fraction of the machine's memory a single allocation plan may use before we refuse.
+MEMORY_FRACTION = 0.7

@@ -1,0 +1,35 @@
+"""Arguments shared by subcommands."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..scene import UNITS, bundled_scene, load_scene
+
+
+def add_scene_args(parser: argparse.ArgumentParser, *, optional_scene: bool) -> None:
+    nargs = "?" if optional_scene else None
+    parser.add_argument("scene", nargs=nargs, type=Path,
+                        help="OBJ file (with its MTL)" + ("; default: the bundled Cornell box" if optional_scene else ""))
+    parser.add_argument("--preset", choices=("draft", "default", "fine"), default="default",
+                        help="speed/accuracy trade (default: %(default)s)")
+    parser.add_argument("--max-patch-size", type=float, default=None, metavar="METRES",
+                        help="longest patch edge, overriding the preset")
+    parser.add_argument("--units", choices=tuple(UNITS), default="m", help="units of the OBJ coordinates")
+    parser.add_argument("--emission", choices=("radiance", "exitance"), default="radiance",
+                        help="read Ke as radiance (E = pi Ke) or as exitance")
+    parser.add_argument("--allow-clamp", action="store_true", help="clamp reflectances >= 1 instead of refusing")
+    parser.add_argument("--no-cache", action="store_true", help="do not read or write the form-factor cache")
+
+
+def load(args):
+    path = args.scene if args.scene is not None else bundled_scene("cornell_box")
+    return load_scene(path, emission=args.emission, units=args.units, allow_clamp=args.allow_clamp)
+
+
+def overrides(args) -> dict:
+    out = {"cache": not args.no_cache}
+    if args.max_patch_size is not None:
+        out["max_patch_size"] = args.max_patch_size
+    return out

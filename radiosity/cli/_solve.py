@@ -1,0 +1,98 @@
+"""``radiosity solve``: solve a scene, print a summary, write picture, meshes and summary.json."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..io.export import write_ply, write_png, write_summary, write_vtp
+from ..solve import solve
+from ._common import add_scene_args, load, overrides
+
+NAME = "solve"
+HELP = "solve a scene's radiosity and write a picture, meshes and summary.json"
+
+
+def add_args(parser) -> None:
+    add_scene_args(parser, optional_scene=True)
+    parser.add_argument("-o", "--output", type=Path, default=Path("radiosity-out"), metavar="OUTDIR",
+                        help="output folder (default: %(default)s)")
+    parser.add_argument("--solver", default="auto",
+                        choices=("auto", "direct", "bicgstab", "gmres", "jacobi", "gauss-seidel", "progressive"))
+    parser.add_argument("--no-picture", action="store_true", help="skip the PNG")
+    parser.add_argument("--points", type=Path, default=None, metavar="FILE",
+                        help="text file of receiver points 'x y z nx ny nz' per line; writes irradiance.csv")
+
+
+def format_summary(solution, load_seconds: float) -> str:
+    s = solution.summary()
+    lines = [f"scene      {s['source']}",
+             f"patches    {s['patches']}   view factors {s['nonzeros']:,}   rays {s['rays'] or 0:,}"
+             + ("   (form factors from cache)" if s["cache_hit"] else "")]
+    times = {"load": load_seconds, **s["timings_s"]}
+    lines.append("time (s)   " + "   ".join(f"{k} {v:.2f}" for k, v in times.items()))
+    sol = s["solver"]
+    lines.append(f"solver     {sol['method']}, iterations {sol['iterations']}, residual {max(sol['residual']):.1e}")
+    e = s["energy_W"]
+    em, ab, es = (np.array(e[k]) for k in ("emitted", "absorbed", "escaped"))
+    lines.append("energy (W) emitted " + fmt3(em) + "  absorbed " + fmt3(ab) + "  escaped " + fmt3(es))
+    lines.append(f"{'object':<16}{'radiosity R':>12}{'G':>10}{'B':>10}   W/m^2")
+    for name, (r, g, b) in s["objects"].items():
+        lines.append(f"{name:<16}{r:>12.4f}{g:>10.4f}{b:>10.4f}")
+    for note in s["notes"]:
+        lines.append(f"note: {note}")
+    return "\n".join(lines)
+
+
+def fmt3(v) -> str:
+    return "(" + ", ".join(f"{x:.4g}" for x in v) + ")"
+
+
+def read_points(path: Path) -> np.ndarray:
+    from .._errors import SceneError
+
+    rows = []
+    for number, line in enumerate(path.read_text().splitlines(), start=1):
+        text = line.split("#", 1)[0].strip().replace(",", " ")
+        if not text:
+            continue
+        try:
+            values = [float(t) for t in text.split()]
+        except ValueError:
+            raise SceneError(f"{path}:{number}: expected 6 numbers 'x y z nx ny nz', got {line!r}") from None
+        if len(values) != 6 or not np.isfinite(values).all():
+            raise SceneError(f"{path}:{number}: expected 6 finite numbers 'x y z nx ny nz', got {line!r}")
+        rows.append(values)
+    if not rows:
+        raise SceneError(f"{path}: no points")
+    return np.asarray(rows)
+
+
+def run(args) -> int:
+    t0 = time.perf_counter()
+    scene = load(args)
+    points = read_points(args.points) if args.points else None
+    load_seconds = time.perf_counter() - t0
+    solution = solve(scene, preset=args.preset, solver=args.solver, progress=sys.stderr.isatty(), **overrides(args))
+    out = args.output
+    out.mkdir(parents=True, exist_ok=True)
+    write_vtp(solution, out / "solution.vtp")
+    write_ply(solution, out / "solution.ply")
+    summary = solution.summary()
+    if not args.no_picture:
+        summary["exposure"] = write_png(solution, out / "picture.png")
+    if points is not None:
+        h = solution.irradiance(points[:, :3], points[:, 3:])
+        from ..io.export import atomic_path
+
+        with atomic_path(out / "irradiance.csv") as tmp:
+            np.savetxt(tmp, np.column_stack([points, h]), delimiter=",", fmt="%.9g",
+                       header="x,y,z,nx,ny,nz,H_r,H_g,H_b (W/m^2)", comments="")
+    write_summary(summary, out / "summary.json")
+    print(format_summary(solution, load_seconds))
+    print(f"wrote      {out}/: picture.png solution.vtp solution.ply summary.json"
+          + (" irradiance.csv" if points is not None else ""))
+    return 0

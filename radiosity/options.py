@@ -1,0 +1,60 @@
+"""Solver options and the presets that trade time for accuracy."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+
+from ._validate import reject_unknown
+
+__all__ = ["Options", "PRESETS"]
+
+
+@dataclass(frozen=True)
+class Options:
+    """Every knob of ``solve``; presets fill them, keyword overrides replace single ones.
+
+    Attributes
+    ----------
+    patch_size_rel : float
+        Longest patch edge as a fraction of the scene's bounding-box diagonal (used unless the
+        scene was loaded with ``max_patch_size`` or ``max_patch_size`` is given here).
+    max_patch_size : float or None
+        Longest patch edge in metres; overrides ``patch_size_rel``.
+    near_order : int
+        Gauss points per direction on the receiver for pairs closer than ``far_separation``.
+    far_separation : float
+        Distance between centroids over the sum of circumradii beyond which one point is used.
+    visibility_samples : int
+        Sample points per direction on each patch of a pair that may be blocked
+        (``visibility_samples**4`` rays per pair).
+    solver : {"auto", "direct", "bicgstab", "gmres", "jacobi", "gauss-seidel", "progressive"}
+    rtol : float
+        Relative residual at which iterative solvers stop.
+    cache : bool
+        Reuse form factors stored on disk for the same geometry and accuracy settings.
+    """
+
+    patch_size_rel: float = 1 / 25
+    max_patch_size: float | None = None
+    near_order: int = 3
+    far_separation: float = 3.0
+    visibility_samples: int = 2
+    solver: str = "auto"
+    rtol: float = 1e-10
+    cache: bool = True
+    progress: bool = False
+
+    @classmethod
+    def from_preset(cls, preset: str = "default", **overrides) -> "Options":
+        """Options of a named preset with some fields replaced."""
+        if preset not in PRESETS:
+            raise TypeError(f"unknown preset {preset!r}; valid: {', '.join(PRESETS)}")
+        reject_unknown(overrides, [f.name for f in fields(cls)], "solve option")
+        return replace(PRESETS[preset], **overrides)
+
+
+PRESETS = {
+    "draft": Options(patch_size_rel=1 / 12, near_order=2, far_separation=2.0, visibility_samples=2),
+    "default": Options(),
+    "fine": Options(patch_size_rel=1 / 50, near_order=4, far_separation=4.0, visibility_samples=3),
+}

@@ -1,0 +1,230 @@
+"""Scene: named objects, per-patch materials and the patches themselves; ``load_scene``."""
+
+from __future__ import annotations
+
+import hashlib
+import warnings
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+
+from ._errors import RadiosityWarning, SceneError
+from ._validate import reject_unknown
+from .formfactors import polygon_normals
+from .io.obj import read_obj
+from .patches import Patches, subdivide_faces
+from .quadrature import centroids_and_areas
+
+__all__ = ["Scene", "load_scene", "bundled_scene"]
+
+UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+EMISSION_MODES = ("radiance", "exitance")
+LOAD_OPTIONS = ("units", "allow_clamp", "two_sided")
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """A scene cut into patches, ready for the form-factor stage.
+
+    Attributes
+    ----------
+    objects : list of str
+        Object names (``o`` or ``g`` in the OBJ), in file order.
+    patch_quads : (n, 4, 3) float
+        Patch vertices, metres; triangles repeat their third vertex.
+    patch_object : (n,) int
+        Index into ``objects`` of each patch.
+    patch_face : (n,) int
+        Index of the OBJ face each patch was cut from.
+    reflectance : (n, 3) float
+        Diffuse reflectance rho per patch and RGB channel, in [0, 1).
+    emission : (n, 3) float
+        Emitted exitance E per patch, W/m^2.
+    """
+
+    objects: list[str]
+    patch_quads: np.ndarray
+    patch_object: np.ndarray
+    patch_face: np.ndarray
+    reflectance: np.ndarray
+    emission: np.ndarray
+    max_patch_size: float | None = None
+    source: str = ""
+    face_line: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    notes: tuple[str, ...] = ()
+
+    @property
+    def n_patches(self) -> int:
+        return len(self.patch_quads)
+
+    @cached_property
+    def _centroid_area(self) -> tuple[np.ndarray, np.ndarray]:
+        return centroids_and_areas(self.patch_quads)
+
+    @property
+    def patch_area(self) -> np.ndarray:
+        """(n,) patch areas, m^2."""
+        return self._centroid_area[1]
+
+    @property
+    def patch_centroid(self) -> np.ndarray:
+        """(n, 3) area centroids, metres."""
+        return self._centroid_area[0]
+
+    @cached_property
+    def patch_normal(self) -> np.ndarray:
+        """(n, 3) unit normals (front side)."""
+        return polygon_normals(self.patch_quads)
+
+    @cached_property
+    def scale(self) -> float:
+        """Length of the scene's bounding-box diagonal, metres."""
+        pts = self.patch_quads.reshape(-1, 3)
+        return float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
+
+    @cached_property
+    def geometry_hash(self) -> str:
+        """Hash of the patch geometry alone: the key of the form-factor cache."""
+        digest = hashlib.sha256(np.ascontiguousarray(self.patch_quads, dtype=np.float64).tobytes())
+        return digest.hexdigest()[:32]
+
+    def with_materials(self, reflectance=None, emission=None) -> "Scene":
+        """The same geometry with new per-patch reflectance and/or emission (cache stays valid)."""
+        rho = self.reflectance if reflectance is None else np.broadcast_to(np.asarray(reflectance, float), (self.n_patches, 3)).copy()
+        em = self.emission if emission is None else np.broadcast_to(np.asarray(emission, float), (self.n_patches, 3)).copy()
+        _check_materials(rho, em, self.source)
+        return replace(self, reflectance=rho, emission=em)
+
+    def object_material(self, name: str, *, reflectance=None, emission=None) -> "Scene":
+        """A copy with one object's reflectance and/or emitted exitance replaced."""
+        if name not in self.objects:
+            raise KeyError(f"no object {name!r}; objects: {', '.join(self.objects)}")
+        mask = self.patch_object == self.objects.index(name)
+        rho, em = self.reflectance.copy(), self.emission.copy()
+        if reflectance is not None:
+            rho[mask] = reflectance
+        if emission is not None:
+            em[mask] = emission
+        return self.with_materials(rho, em)
+
+    def resubdivided(self, max_patch_size: float) -> "Scene":
+        """The scene cut again so no patch edge exceeds ``max_patch_size`` (materials follow)."""
+        is_triangle = (self.patch_quads[:, 3] == self.patch_quads[:, 2]).all(axis=1)
+        faces = [np.arange(4 * i, 4 * i + (3 if tri else 4)) for i, tri in enumerate(is_triangle)]
+        patches, _ = subdivide_faces(self.patch_quads.reshape(-1, 3), faces, max_patch_size)
+        parent = patches.patch_face
+        return replace(self, patch_quads=patches.quads, patch_object=self.patch_object[parent],
+                       patch_face=self.patch_face[parent], reflectance=self.reflectance[parent],
+                       emission=self.emission[parent], max_patch_size=max_patch_size)
+
+
+def _check_materials(rho: np.ndarray, emission: np.ndarray, where: str) -> None:
+    if not np.isfinite(rho).all() or (rho < 0).any() or (rho >= 1).any():
+        raise SceneError(f"{where}: reflectance must be in [0, 1) per channel")
+    if not np.isfinite(emission).all() or (emission < 0).any():
+        raise SceneError(f"{where}: emission must be finite and non-negative")
+
+
+def load_scene(path, *, max_patch_size: float | None = None, emission: str = "radiance", **options) -> Scene:
+    """Load an OBJ + MTL scene and cut it into patches.
+
+    Parameters
+    ----------
+    path : str or Path
+        The OBJ file; ``mtllib`` files are read relative to it.
+    max_patch_size : float, optional
+        Longest patch edge in metres (after unit conversion). None keeps each face whole
+        (non-planar or non-convex faces are split into triangles).
+    emission : {"radiance", "exitance"}, default: "radiance"
+        How to read ``Ke``: as emitted radiance L (E = pi L, what renderers do) or as exitance E.
+    units : {"m", "cm", "mm"}, default: "m"
+        Units of the file's coordinates.
+    allow_clamp : bool, default: False
+        Clamp reflectances >= 1 to 0.999 (with a warning) instead of refusing the scene.
+
+    Returns
+    -------
+    Scene
+
+    Raises
+    ------
+    SceneError
+        Unreadable or malformed files, unknown materials, bad reflectance or emission; the
+        message names the file and line.
+
+    Examples
+    --------
+    >>> import radiosity
+    >>> scene = radiosity.load_scene(radiosity.bundled_scene("cornell_box"))
+    >>> scene.objects[:3]
+    ['floor', 'ceiling', 'back_wall']
+    """
+    reject_unknown(options, LOAD_OPTIONS, "load_scene option")
+    if emission not in EMISSION_MODES:
+        raise ValueError(f"emission must be one of {EMISSION_MODES}, got {emission!r}")
+    units = options.get("units", "m")
+    if units not in UNITS:
+        raise ValueError(f"units must be one of {tuple(UNITS)}, got {units!r}")
+    if max_patch_size is not None and not (np.isfinite(max_patch_size) and max_patch_size > 0):
+        raise ValueError(f"max_patch_size must be a positive number of metres, got {max_patch_size!r}")
+    data = read_obj(path)
+    vertices = data.vertices * UNITS[units]
+    patches, report = subdivide_faces(vertices, data.faces, max_patch_size)
+    notes = []
+    for face, deviation in report.nonplanar:
+        notes.append(f"{data.path}:{data.face_line[face]}: face {face + 1} is not planar "
+                     f"(off by {deviation:.3g} m); split into triangles from its first vertex")
+    for face in report.degenerate:
+        notes.append(f"{data.path}:{data.face_line[face]}: face {face + 1} has zero area; ignored")
+    for note in notes:
+        warnings.warn(note, RadiosityWarning, stacklevel=2)
+    if patches.n_patches == 0:
+        raise SceneError(f"{data.path}: every face is degenerate; nothing to solve")
+    rho, em = _patch_materials(data, patches, emission, options.get("allow_clamp", False))
+    return Scene(
+        objects=data.objects,
+        patch_quads=patches.quads,
+        patch_object=data.face_object[patches.patch_face],
+        patch_face=patches.patch_face,
+        reflectance=rho,
+        emission=em,
+        max_patch_size=max_patch_size,
+        source=str(data.path),
+        face_line=data.face_line,
+        notes=tuple(notes),
+    )
+
+
+def _patch_materials(data, patches: Patches, emission: str, allow_clamp: bool) -> tuple[np.ndarray, np.ndarray]:
+    n_mat = len(data.materials)
+    kd = np.array([m.kd for m in data.materials] + [(0.0, 0.0, 0.0)], dtype=float).reshape(n_mat + 1, 3)
+    ke = np.array([m.ke for m in data.materials] + [(0.0, 0.0, 0.0)], dtype=float).reshape(n_mat + 1, 3)
+    for m in data.materials:
+        if min(m.kd) < 0 or (max(m.kd) >= 1 and not allow_clamp):
+            raise SceneError(f"{m.where}: material {m.name!r} has Kd {m.kd}; reflectance must be in [0, 1) "
+                             "per channel (1 or more makes the solution diverge; allow_clamp=True clamps it)")
+        if min(m.ke) < 0:
+            raise SceneError(f"{m.where}: material {m.name!r} has negative Ke {m.ke}")
+    if allow_clamp and (kd >= 1).any():
+        warnings.warn("reflectance >= 1 clamped to 0.999", RadiosityWarning, stacklevel=3)
+        kd = np.minimum(kd, 0.999)
+    scale = np.pi if emission == "radiance" else 1.0
+    material = data.face_material[patches.patch_face]  # -1 (no material) picks the zero row
+    return kd[material].copy(), scale * ke[material]
+
+
+def bundled_scene(name: str = "cornell_box") -> Path:
+    """Path of a scene shipped with the package (``meshes/NAME.obj``)."""
+    here = Path(__file__).resolve().parent
+    for folder in (here.parent / "meshes", here / "meshes"):
+        candidate = folder / f"{name}.obj"
+        if candidate.exists():
+            return candidate
+    from importlib.resources import files
+
+    candidate = Path(str(files("radiosity.meshes") / f"{name}.obj"))
+    if candidate.exists():
+        return candidate
+    raise SceneError(f"no bundled scene named {name!r}")

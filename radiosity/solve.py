@@ -1,0 +1,145 @@
+"""Run the stages: patches -> form factors + visibility -> system -> Solution; view_factors."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from . import _memory
+from .assembly import FillSettings, FillStats, assemble
+from .cache import FormFactorCache
+from .options import Options
+from .scene import Scene
+from .solution import Solution
+from .system import energy_balance, solve_system
+from .visibility import Visibility
+
+__all__ = ["solve", "view_factors", "prepare"]
+
+
+@dataclass
+class Prepared:
+    """A scene cut for solving and its view-factor matrix, with what it cost."""
+
+    scene: Scene
+    F: sp.csr_matrix
+    stats: FillStats
+    timings: dict[str, float] = field(default_factory=dict)
+    cache_hit: bool = False
+
+
+def _fill_settings(options: Options) -> FillSettings:
+    return FillSettings(near_order=options.near_order, far_separation=options.far_separation,
+                        visibility_samples=options.visibility_samples)
+
+
+def _cut(scene: Scene, options: Options) -> Scene:
+    size = options.max_patch_size or scene.max_patch_size
+    if size is None:
+        size = options.patch_size_rel * scene.scale
+    if not np.isfinite(size) or (scene.max_patch_size is not None and size >= scene.max_patch_size):
+        return scene
+    return scene.resubdivided(size)
+
+
+def _progress_bar(enabled: bool, total: int, desc: str):
+    if not enabled:
+        return None, lambda: None
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, desc=desc, unit="patch", leave=False)
+    return bar.update, bar.close
+
+
+def prepare(scene: Scene, options: Options) -> Prepared:
+    """Cut the scene to the options' patch size and fill (or fetch) its view-factor matrix."""
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    cut = _cut(scene, options)
+    timings["patches"] = time.perf_counter() - t0
+    settings = _fill_settings(options)
+    _memory.check_fill(cut.n_patches)
+    cache = FormFactorCache.default() if options.cache else None
+    if cache is not None:
+        hit = cache.load(cut.geometry_hash, settings)
+        if hit is not None:
+            F, stats = hit
+            timings["form factors"] = 0.0
+            timings["visibility"] = 0.0
+            timings["cache"] = time.perf_counter() - t0 - timings["patches"]
+            return Prepared(cut, F, stats, timings, cache_hit=True)
+    visibility = Visibility(cut.patch_quads, cut.patch_normal, cut.patch_object, cut.scale,
+                            samples=settings.visibility_samples)
+    update, close = _progress_bar(options.progress, cut.n_patches, "form factors")
+    try:
+        F, stats = assemble(cut.patch_quads, cut.patch_normal, cut.patch_centroid, cut.patch_area,
+                            visibility, settings, progress=update)
+    finally:
+        close()
+    timings["form factors"] = stats.seconds_formfactors
+    timings["visibility"] = stats.seconds_visibility
+    if cache is not None:
+        cache.store(cut.geometry_hash, settings, F, stats)
+    return Prepared(cut, F, stats, timings)
+
+
+def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
+    """Solve the scene's radiosity.
+
+    Parameters
+    ----------
+    scene : Scene
+        From :func:`load_scene`.
+    preset : {"draft", "default", "fine"}, default: "default"
+        Ordered by time and by accuracy; see :data:`radiosity.options.PRESETS`.
+    **overrides
+        Any field of :class:`radiosity.options.Options` (``max_patch_size``,
+        ``near_order``, ``visibility_samples``, ``solver``, ``rtol``, ``cache``, ...).
+
+    Returns
+    -------
+    Solution
+
+    Examples
+    --------
+    >>> import radiosity
+    >>> scene = radiosity.load_scene(radiosity.bundled_scene("cornell_box"))
+    >>> solution = radiosity.solve(scene, preset="draft", cache=False)
+    >>> sorted(solution.object_radiosity())[:2]
+    ['back_wall', 'ceiling']
+    """
+    options = Options.from_preset(preset, **overrides)
+    prepared = prepare(scene, options)
+    cut = prepared.scene
+    t0 = time.perf_counter()
+    radiosity, report = solve_system(prepared.F, cut.reflectance, cut.emission, cut.patch_area,
+                                     method=options.solver, rtol=options.rtol)
+    timings = dict(prepared.timings)
+    timings["solve"] = time.perf_counter() - t0
+    balance = energy_balance(prepared.F, cut.patch_area, cut.reflectance, cut.emission, radiosity)
+    return Solution(scene=cut, radiosity=radiosity, F=prepared.F, options=options, timings=timings,
+                    fill=prepared.stats, solver=report, energy=balance, cache_hit=prepared.cache_hit)
+
+
+def view_factors(scene: Scene, *, preset: str = "default", **overrides) -> sp.csr_matrix:
+    """The patch-to-patch view-factor matrix F with occlusion: F[i, j] = F(i -> j).
+
+    Row i holds the fractions of patch i's emitted power reaching each patch j. The patches
+    are the scene's as loaded (``max_patch_size`` at load time), unless ``max_patch_size`` is
+    given here; unlike :func:`solve`, presets never cut patches further.
+
+    Examples
+    --------
+    >>> import numpy as np, radiosity
+    >>> scene = radiosity.load_scene(radiosity.bundled_scene("unit_cube"))
+    >>> F = radiosity.view_factors(scene, cache=False)
+    >>> bool(np.allclose(F.sum(axis=1), 1.0, atol=1e-6))
+    True
+    """
+    options = Options.from_preset(preset, **overrides)
+    if options.max_patch_size is None:
+        options = Options.from_preset(preset, **{**overrides, "patch_size_rel": np.inf})
+    return prepare(scene, options).F

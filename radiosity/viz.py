@@ -1,0 +1,87 @@
+"""Pictures and pyvista meshes of a solution: the only module that imports pyvista (lazily)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["to_polydata", "tone_map", "render", "scene_camera"]
+
+# The Cornell box's published camera: position, focal point, up (metres), vertical view angle.
+CORNELL_CAMERA = ((0.278, 0.273, -0.8), (0.278, 0.273, 0.0), (0.0, 1.0, 0.0), 39.3)
+
+
+def tone_map(radiance: np.ndarray, exposure: float) -> np.ndarray:
+    """Linear radiance (..., 3) times exposure, clipped, to 8-bit sRGB."""
+    x = np.clip(radiance * exposure, 0.0, 1.0)
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    return np.round(255 * srgb).astype(np.uint8)
+
+
+def auto_exposure(solution) -> float:
+    """Exposure putting the 98th percentile of non-emitting radiance at 0.85 of white."""
+    lit = ~solution.scene.emission.any(axis=1)
+    radiance = solution.radiosity[lit] / np.pi if lit.any() else solution.radiosity / np.pi
+    luminance = radiance @ np.array([0.2126, 0.7152, 0.0722])
+    level = np.percentile(luminance, 98) if len(luminance) else 0.0
+    return float(0.85 / level) if level > 0 else 1.0
+
+
+def to_polydata(solution):
+    """pyvista.PolyData of the solved patches with per-face and per-vertex radiosity.
+
+    Cell data: ``radiosity`` (n, 3) W/m^2, ``object`` (n,) index; point data: ``radiosity``
+    (area-weighted over the patches of the same object meeting at the vertex).
+    """
+    import pyvista as pv
+
+    vertices, faces, vertex_b = solution.vertex_mesh
+    cells = np.concatenate([np.concatenate([[len(f)], f]) for f in faces]).astype(np.int64)
+    mesh = pv.PolyData(vertices, cells)
+    mesh.cell_data["radiosity"] = solution.radiosity
+    mesh.cell_data["object"] = solution.scene.patch_object
+    mesh.point_data["radiosity"] = vertex_b
+    return mesh
+
+
+def scene_camera(source: str):
+    """Camera written in the OBJ as ``# camera: px py pz fx fy fz ux uy uz fov``, if any."""
+    try:
+        with open(source, encoding="utf-8", errors="replace") as fh:
+            for line in fh:
+                if line.startswith("# camera:"):
+                    v = [float(t) for t in line.split(":", 1)[1].split()]
+                    return tuple(v[0:3]), tuple(v[3:6]), tuple(v[6:9]), v[9]
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def render(solution, path: str | Path | None = None, *, window_size=(800, 800), exposure: float | None = None,
+           off_screen: bool = True):
+    """Render the solution (radiance B/pi, tone-mapped to sRGB) and save a PNG if ``path``."""
+    import pyvista as pv
+
+    mesh = to_polydata(solution)
+    exposure = auto_exposure(solution) if exposure is None else exposure
+    mesh.point_data["rgb"] = tone_map(mesh.point_data["radiosity"] / np.pi, exposure)
+    plotter = pv.Plotter(off_screen=off_screen, window_size=list(window_size))
+    plotter.set_background("black")
+    plotter.add_mesh(mesh, scalars="rgb", rgb=True, lighting=False, show_scalar_bar=False)
+    camera = scene_camera(solution.scene.source)
+    if camera is not None:
+        position, focal, up, angle = camera
+        plotter.camera.position = position
+        plotter.camera.focal_point = focal
+        plotter.camera.up = up
+        plotter.camera.view_angle = angle
+    else:
+        plotter.camera_position = "iso"
+        plotter.reset_camera()
+    if path is not None:
+        plotter.screenshot(str(path))
+        plotter.close()
+        return exposure
+    plotter.show()
+    return exposure
