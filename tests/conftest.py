@@ -1,0 +1,42 @@
+"""Shared test setup: off-screen pyvista, a private form-factor cache, hypothesis profiles."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+os.environ.setdefault("PYVISTA_OFF_SCREEN", "true")
+
+from hypothesis import HealthCheck, settings  # noqa: E402
+
+settings.register_profile("deterministic", derandomize=True, deadline=None, max_examples=60,
+                          suppress_health_check=[HealthCheck.too_slow])
+settings.register_profile("thorough", deadline=None, max_examples=500)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "deterministic"))
+
+
+def pytest_report_header(config):
+    import importlib.metadata as md
+
+    parts = []
+    for name in ("numpy", "scipy", "trimesh", "embreex", "pyvista", "numba"):
+        try:
+            parts.append(f"{name} {md.version(name)}")
+        except md.PackageNotFoundError:
+            parts.append(f"{name} missing")
+    return "radiosity deps: " + ", ".join(parts)
+
+
+@pytest.fixture(autouse=True)
+def _private_cache(tmp_path_factory, monkeypatch):
+    """Every test gets its own empty form-factor cache folder (never the user's)."""
+    monkeypatch.setenv("RADIOSITY_CACHE", str(tmp_path_factory.mktemp("cache")))
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _pyvista_off_screen():
+    import pyvista
+
+    pyvista.OFF_SCREEN = True
+    yield

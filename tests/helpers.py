@@ -1,0 +1,65 @@
+"""Canonical geometries with their reference values (see ../shared/FIELD_NOTES.md)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+UNIT_SQUARE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)  # normal +z
+
+
+def square_at(z: float, *, facing_down: bool = True) -> np.ndarray:
+    """Unit square at height z, wound so its normal points down (towards z = 0) by default."""
+    sq = UNIT_SQUARE.copy()
+    sq[:, 2] = z
+    return sq[::-1].copy() if facing_down else sq
+
+
+# Parallel unit squares, directly opposed, separated by the key (Howell C-11).
+PARALLEL_SQUARES = {1.0: 0.1998248957, 0.1: 0.8269945224, 10.0: 0.0031620568}
+# Perpendicular unit squares sharing an edge (Howell C-14).
+PERPENDICULAR_SQUARES = 0.2000437761
+WALL_X0 = np.array([[0, 0, 0], [0, 0, 1], [0, 1, 1], [0, 1, 0]], dtype=float)  # x = 0, normal +x
+# Parallel squares 1 apart with a centred 0.5 x 0.5 blocker midway.
+BLOCKED_PARALLEL_SQUARES = 0.0995062946
+# Coaxial disks, radius = distance: (3 - sqrt 5) / 2.
+COAXIAL_DISKS = 0.3819660113
+
+
+def corner_point_factor(a: float, b: float, c: float) -> float:
+    """Point under the corner of an a x b rectangle at height c, facing it (Howell B-3)."""
+    x, y = a / c, b / c
+    return (x / np.sqrt(1 + x * x) * np.arctan(y / np.sqrt(1 + x * x))
+            + y / np.sqrt(1 + y * y) * np.arctan(x / np.sqrt(1 + y * y))) / (2 * np.pi)
+
+
+def regular_polygon(radius: float, sides: int, z: float = 0.0, *, facing_down: bool = False) -> np.ndarray:
+    t = np.linspace(0, 2 * np.pi, sides, endpoint=False)
+    poly = np.column_stack([radius * np.cos(t), radius * np.sin(t), np.full(sides, z)])
+    return poly[::-1].copy() if facing_down else poly
+
+
+def write_obj(path, objects: dict[str, list[np.ndarray]], materials: dict[str, tuple] | None = None,
+              object_material: dict[str, str] | None = None) -> str:
+    """Write a small OBJ (+ MTL) from {object: [polygon (k, 3), ...]}; returns the OBJ path.
+
+    ``materials`` maps a material name to (kd, ke) triples; ``object_material`` picks one per
+    object (default: the first material).
+    """
+    from pathlib import Path
+
+    path = Path(path)
+    materials = materials or {"grey": ((0.5, 0.5, 0.5), (0.0, 0.0, 0.0))}
+    mtl = path.with_suffix(".mtl")
+    mtl.write_text("".join(f"newmtl {name}\nKd {kd[0]} {kd[1]} {kd[2]}\nKe {ke[0]} {ke[1]} {ke[2]}\n\n"
+                           for name, (kd, ke) in materials.items()))
+    lines = [f"mtllib {mtl.name}"]
+    vid = 1
+    first = next(iter(materials))
+    for name, polys in objects.items():
+        lines += [f"o {name}", f"usemtl {(object_material or {}).get(name, first)}"]
+        for poly in polys:
+            lines += ["v %.17g %.17g %.17g" % tuple(v) for v in poly]
+            lines.append("f " + " ".join(str(vid + k) for k in range(len(poly))))
+            vid += len(poly)
+    path.write_text("\n".join(lines) + "\n")
+    return str(path)
