@@ -1,0 +1,99 @@
+"""Shared helpers for the benchmark scripts: a timer, the ``--quick`` flag, a JSON writer.
+
+Every script in ``bench/`` is a plain program (``python bench/bench_x.py [--quick]``) that
+prints a table and writes one JSON file to ``bench/results/``. Keep this module free of
+radiosity imports so any script can use it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def parse_args(description: str, argv=None, extra: Callable[[argparse.ArgumentParser], None] | None = None
+               ) -> argparse.Namespace:
+    """Parse the common flags: ``--quick`` (small sizes, few repeats) and ``--out PATH``."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--quick", action="store_true", help="small sizes and few repeats")
+    parser.add_argument("--out", default=None, help="JSON output path (default: bench/results/<name>.json)")
+    if extra is not None:
+        extra(parser)
+    return parser.parse_args(argv)
+
+
+def best_time(fn: Callable[[], object], *, repeat: int = 3, number: int = 1, warmup: int = 1) -> float:
+    """Best wall time of ``number`` calls to ``fn`` over ``repeat`` runs, in seconds per call."""
+    for _ in range(warmup):
+        fn()
+    best = float("inf")
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        for _ in range(number):
+            fn()
+        best = min(best, (time.perf_counter() - t0) / number)
+    return best
+
+
+class Timer:
+    """Context manager measuring wall time: ``with Timer() as t: ...; t.seconds``."""
+
+    def __enter__(self):
+        self._t0 = time.perf_counter()
+        self.seconds = float("nan")
+        return self
+
+    def __exit__(self, *exc):
+        self.seconds = time.perf_counter() - self._t0
+        return False
+
+
+def machine_info() -> dict:
+    """What a reader needs to compare numbers between machines."""
+    info = {"python": sys.version.split()[0], "platform": platform.platform(),
+            "cpus": os.cpu_count(), "time": time.strftime("%Y-%m-%dT%H:%M:%S")}
+    for name in ("numpy", "scipy", "numba"):
+        try:
+            import importlib.metadata as md
+
+            info[name] = md.version(name)
+        except Exception:  # noqa: BLE001 - optional packages
+            info[name] = None
+    return info
+
+
+def write_json(name: str, payload: dict, out: str | None = None) -> Path:
+    """Write ``payload`` plus machine info to ``bench/results/<name>.json`` (or ``out``)."""
+    path = Path(out) if out else RESULTS / f"{name}.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    data = {"machine": machine_info(), **payload}
+    path.write_text(json.dumps(data, indent=2, default=float) + "\n")
+    return path
+
+
+def print_table(rows: list[dict], columns: list[str] | None = None, *, title: str | None = None) -> None:
+    """Print ``rows`` (dicts) as an aligned plain-text table."""
+    if not rows:
+        return
+    columns = columns or list(rows[0])
+
+    def fmt(v):
+        if isinstance(v, float):
+            return f"{v:.4g}"
+        return str(v)
+
+    cells = [[fmt(r.get(c, "")) for c in columns] for r in rows]
+    widths = [max(len(c), *(len(row[k]) for row in cells)) for k, c in enumerate(columns)]
+    if title:
+        print(f"\n{title}")
+    print("  ".join(c.rjust(w) for c, w in zip(columns, widths)))
+    for row in cells:
+        print("  ".join(v.rjust(w) for v, w in zip(row, widths)))
