@@ -54,6 +54,12 @@ class Scene:
     source: str = ""
     face_line: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     notes: tuple[str, ...] = ()
+    # View3D obstructions: patches that block light but exchange none (see io/view3d.py).
+    patch_obstruction: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+
+    def __post_init__(self):
+        if len(self.patch_obstruction) != len(self.patch_quads):
+            object.__setattr__(self, "patch_obstruction", np.zeros(len(self.patch_quads), bool))
 
     @property
     def n_patches(self) -> int:
@@ -116,6 +122,7 @@ class Scene:
         patches, _ = subdivide_faces(self.patch_quads.reshape(-1, 3), faces, max_patch_size)
         parent = patches.patch_face
         return replace(self, patch_quads=patches.quads, patch_object=self.patch_object[parent],
+                       patch_obstruction=self.patch_obstruction[parent],
                        patch_face=self.patch_face[parent], reflectance=self.reflectance[parent],
                        emission=self.emission[parent], max_patch_size=max_patch_size)
 
@@ -162,6 +169,8 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
     ['floor', 'ceiling', 'back_wall']
     """
     reject_unknown(options, LOAD_OPTIONS, "load_scene option")
+    if Path(path).suffix.lower() == ".vs3":
+        return load_vs3(path, max_patch_size=max_patch_size)
     if emission not in EMISSION_MODES:
         raise ValueError(f"emission must be one of {EMISSION_MODES}, got {emission!r}")
     units = options.get("units", "m")
@@ -213,6 +222,29 @@ def _patch_materials(data, patches: Patches, emission: str, allow_clamp: bool) -
     scale = np.pi if emission == "radiance" else 1.0
     material = data.face_material[patches.patch_face]  # -1 (no material) picks the zero row
     return kd[material].copy(), scale * ke[material]
+
+
+def load_vs3(path, *, max_patch_size: float | None = None) -> Scene:
+    """A View3D ``.vs3`` model as a Scene: one object per surface, obstructions flagged.
+
+    Reflectance is ``1 - emissivity`` (grey body), nothing emits; obstructions block light
+    but are left out of the view-factor matrix (their rows and columns are zero).
+    """
+    from .io.view3d import read_vs3
+
+    data = read_vs3(path)
+    patches, report = subdivide_faces(data["vertices"], [np.asarray(s) for s in data["surfaces"]], max_patch_size)
+    if report.degenerate:
+        bad = report.degenerate[0]
+        raise SceneError(f"{path}: surface {bad + 1} ({data['names'][bad]}) has zero area")
+    parent = patches.patch_face
+    rho = np.repeat((1.0 - data["emissivity"][parent])[:, None], 3, axis=1)
+    return Scene(objects=list(data["names"]), patch_quads=patches.quads, patch_object=parent,
+                 patch_face=parent, reflectance=np.clip(rho, 0.0, 0.999), emission=np.zeros((len(parent), 3)),
+                 max_patch_size=max_patch_size, source=str(path),
+                 notes=tuple(f"{path}: surface {f + 1} is not planar (off by {d:.3g} m); split into triangles"
+                             for f, d in report.nonplanar),
+                 patch_obstruction=data["obstruction"][parent])
 
 
 def bundled_scene(name: str = "cornell_box") -> Path:
