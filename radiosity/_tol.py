@@ -30,3 +30,26 @@ DROP_FACTOR = 1e-12
 
 # Fraction of the machine's memory a single allocation plan may use before we refuse.
 MEMORY_FRACTION = 0.7
+
+# --- Form-factor kernels (radiosity/formfactors.py, quadrature.py) ---------------------------
+
+# A receiver whose distance to the source's reference vertex exceeds this multiple of the source's
+# radius (around that vertex) uses the cancellation-free "far" edge sum: the reference term
+# 2·A/|c|² plus per-edge corrections, instead of Lambert's raw sum of O(size/distance) terms
+# whose total is O((size/distance)²). Below it the raw sum loses at most a few bits.
+FAR_FIELD_RATIO = 2.0
+
+# An edge whose subtended sine is below this uses the arcsin series for θ/sinθ − 1 (four terms)
+# instead of atan2; the series remainder is then < 3e-12 of the correction it approximates.
+FAR_SERIES_SINE = 0.05
+
+# The series path is kept only where its error estimate (sum of the per-edge remainders) is below
+# this fraction of the form factor; otherwise the pair is recomputed with atan2 on every edge.
+FAR_SERIES_RTOL = 1e-13
+
+# Receiver-triangle pairs handed to one parallel task of the numba kernels.
+KERNEL_BLOCK = 4096
+
+# Adaptive patch-pair quadrature: a pair is accepted when two successive estimates agree to
+# rtol·F, or to this absolute floor (form factors below it are dropped from F anyway).
+PAIR_ATOL = 1e-14
