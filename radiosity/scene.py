@@ -146,8 +146,9 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
         (non-planar or non-convex faces are split into triangles).
     emission : {"radiance", "exitance"}, default: "radiance"
         How to read ``Ke``: as emitted radiance L (E = pi L, what renderers do) or as exitance E.
-    units : {"m", "cm", "mm"}, default: "m"
-        Units of the file's coordinates.
+    units : {"m", "cm", "mm"}, optional
+        Units of the file's coordinates. Not given: metres, with a warning if the scene is
+        more than 50 m across (a millimetre file read as metres); give "m" to silence it.
     allow_clamp : bool, default: False
         Clamp reflectances >= 1 to 0.999 (with a warning) instead of refusing the scene.
 
@@ -173,25 +174,26 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
         return load_vs3(path, max_patch_size=max_patch_size)
     if emission not in EMISSION_MODES:
         raise ValueError(f"emission must be one of {EMISSION_MODES}, got {emission!r}")
-    units = options.get("units", "m")
-    if units not in UNITS:
+    units = options.get("units")  # None: metres, and the millimetre heuristic may warn
+    if units is not None and units not in UNITS:
         raise ValueError(f"units must be one of {tuple(UNITS)}, got {units!r}")
     if max_patch_size is not None and not (np.isfinite(max_patch_size) and max_patch_size > 0):
         raise ValueError(f"max_patch_size must be a positive number of metres, got {max_patch_size!r}")
     data = read_obj(path)
-    vertices = data.vertices * UNITS[units]
+    vertices = data.vertices * UNITS[units or "m"]
     patches, report = subdivide_faces(vertices, data.faces, max_patch_size)
-    notes = []
-    for face, deviation in report.nonplanar:
-        notes.append(f"{data.path}:{data.face_line[face]}: face {face + 1} is not planar "
-                     f"(off by {deviation:.3g} m); split into triangles from its first vertex")
-    for face in report.degenerate:
-        notes.append(f"{data.path}:{data.face_line[face]}: face {face + 1} has zero area; ignored")
+    notes = list(data.warnings) + _units_notes(data, units) + _face_notes(data, report)
+    if patches.n_patches == 0:
+        for note in notes:
+            warnings.warn(note, RadiosityWarning, stacklevel=2)
+        msg = (f"{data.path}: all {len(data.faces)} face(s) have zero area (degenerate); nothing to solve")
+        raise SceneError(msg)
+    rho, em = _patch_materials(data, patches, emission, options.get("allow_clamp", False), notes)
+    if not em.any():
+        notes.append(f"{data.path}: no face emits light (no material used has Ke > 0); "
+                     "the solution is all zero")
     for note in notes:
         warnings.warn(note, RadiosityWarning, stacklevel=2)
-    if patches.n_patches == 0:
-        raise SceneError(f"{data.path}: every face is degenerate; nothing to solve")
-    rho, em = _patch_materials(data, patches, emission, options.get("allow_clamp", False))
     return Scene(
         objects=data.objects,
         patch_quads=patches.quads,
@@ -206,18 +208,62 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
     )
 
 
-def _patch_materials(data, patches: Patches, emission: str, allow_clamp: bool) -> tuple[np.ndarray, np.ndarray]:
+# A scene larger than this (file units, no units given) is probably in millimetres or centimetres.
+_MM_HINT_EXTENT = 50.0
+# At most this many faces are named one by one in a note; the rest are counted.
+_NOTE_FACES = 5
+
+
+def _units_notes(data, units: str | None) -> list[str]:
+    """A note when no units were given and the scene looks like millimetres (over 50 m across)."""
+    if units is not None or not data.faces:
+        return []
+    used = np.unique(np.concatenate(data.faces))
+    extent = float(np.ptp(data.vertices[used], axis=0).max())
+    if extent <= _MM_HINT_EXTENT:
+        return []
+    return [f"{data.path}: the scene is {extent:.4g} m across (more than {_MM_HINT_EXTENT:g} m); if its "
+            f"coordinates are millimetres, give units='mm' (--units mm); units='m' silences this"]
+
+
+def _face_notes(data, report) -> list[str]:
+    """Notes on non-planar faces (split) and zero-area faces (dropped), a few named, the rest counted."""
+    notes = []
+    for face, deviation in report.nonplanar[:_NOTE_FACES]:
+        notes.append(f"{data.path}:{data.face_line[face]}: face {face + 1} is not planar "
+                     f"(off by {deviation:.3g} m); split into triangles from its first vertex")
+    if len(report.nonplanar) > _NOTE_FACES:
+        notes.append(f"{data.path}: {len(report.nonplanar) - _NOTE_FACES} more non-planar face(s) split "
+                     f"(largest deviation {max(d for _, d in report.nonplanar):.3g} m)")
+    for face in report.degenerate[:_NOTE_FACES]:
+        notes.append(f"{data.path}:{data.face_line[face]}: face {face + 1} has zero area; ignored")
+    if len(report.degenerate) > _NOTE_FACES:
+        notes.append(f"{data.path}: {len(report.degenerate) - _NOTE_FACES} more zero-area face(s) ignored")
+    return notes
+
+
+def _patch_materials(data, patches: Patches, emission: str, allow_clamp: bool, notes: list | None = None
+                     ) -> tuple[np.ndarray, np.ndarray]:
     n_mat = len(data.materials)
     kd = np.array([m.kd for m in data.materials] + [(0.0, 0.0, 0.0)], dtype=float).reshape(n_mat + 1, 3)
     ke = np.array([m.ke for m in data.materials] + [(0.0, 0.0, 0.0)], dtype=float).reshape(n_mat + 1, 3)
     for m in data.materials:
-        if min(m.kd) < 0 or (max(m.kd) >= 1 and not allow_clamp):
-            raise SceneError(f"{m.where}: material {m.name!r} has Kd {m.kd}; reflectance must be in [0, 1) "
-                             "per channel (1 or more makes the solution diverge; allow_clamp=True clamps it)")
+        kd_text = " ".join(f"{v:g}" for v in m.kd)
+        if min(m.kd) < 0:
+            raise SceneError(f"{m.where}: material {m.name!r} has Kd {kd_text}; reflectance must be in "
+                             "[0, 1) per channel, and a negative one is never valid")
+        if max(m.kd) >= 1 and not allow_clamp:
+            raise SceneError(f"{m.where}: material {m.name!r} has Kd {kd_text}; reflectance must be in "
+                             "[0, 1) per channel (1 or more never converges); allow_clamp=True "
+                             "(--allow-clamp) clamps it to 0.999")
+        if max(m.kd) >= 1 and notes is not None:
+            notes.append(f"{m.where}: material {m.name!r} has Kd {kd_text}; clamped to 0.999 (allow_clamp)")
         if min(m.ke) < 0:
-            raise SceneError(f"{m.where}: material {m.name!r} has negative Ke {m.ke}")
+            raise SceneError(f"{m.where}: material {m.name!r} has negative Ke "
+                             f"{' '.join(f'{v:g}' for v in m.ke)}; emission must be >= 0")
     if allow_clamp and (kd >= 1).any():
-        warnings.warn("reflectance >= 1 clamped to 0.999", RadiosityWarning, stacklevel=3)
+        if notes is None:
+            warnings.warn("reflectance >= 1 clamped to 0.999", RadiosityWarning, stacklevel=3)
         kd = np.minimum(kd, 0.999)
     scale = np.pi if emission == "radiance" else 1.0
     material = data.face_material[patches.patch_face]  # -1 (no material) picks the zero row

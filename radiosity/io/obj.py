@@ -4,6 +4,17 @@ We tokenise OBJ and MTL ourselves rather than through ``trimesh.load``: trimesh 
 skips malformed faces, triangulates quads we want to keep, keeps ``Ke`` only as strings and
 can attach object names to the wrong geometry when it splits a file. Here every face keeps
 its object, its material and the line it came from, so later stages can name it in errors.
+
+What the reader accepts (see ``docs/errors.md`` for every message):
+
+- UTF-8 (with or without a byte-order mark); other encodings are read as Latin-1, with a note.
+- ``\\n``, ``\\r\\n`` and ``\\r`` line endings; a ``\\`` at the end of a line continues it.
+- ``f`` references as ``v``, ``v/vt``, ``v//vn`` or ``v/vt/vn``, positive (1-based) or negative
+  (relative to the last vertex so far); only the ``v`` part is used.
+- ``mtllib`` anywhere in the file (also after ``usemtl``), with one or more file names.
+- ``o``/``g`` without faces and materials nobody uses are harmless and dropped.
+- ``vt``, ``vn``, ``s`` and other statements that do not change the geometry are ignored;
+  ``l``, ``p``, ``curv`` and ``surf`` elements are ignored with a note (only faces carry light).
 """
 
 from __future__ import annotations
@@ -16,7 +27,18 @@ import numpy as np
 
 from .._errors import SceneError
 
-__all__ = ["ObjData", "Material", "read_obj", "read_mtl"]
+__all__ = ["ObjData", "Material", "read_obj", "read_mtl", "MAX_COORDINATE"]
+
+# Largest accepted |coordinate| in file units. A million kilometres in metres: nothing real is
+# modelled beyond it, and squares of larger values start to lose the precision areas need.
+MAX_COORDINATE = 1e9
+
+# A file whose first bytes hold this fraction of control characters (or any NUL) is binary.
+_BINARY_FRACTION = 0.1
+_SNIFF_BYTES = 8192
+
+# Statements that carry geometry we cannot use; they are counted and reported, not read.
+_IGNORED_ELEMENTS = {"l": "line", "p": "point", "curv": "curve", "curv2": "curve", "surf": "surface"}
 
 
 @dataclass
@@ -31,7 +53,12 @@ class Material:
 
 @dataclass
 class ObjData:
-    """An OBJ file as arrays: faces are lists of 0-based vertex indices."""
+    """An OBJ file as arrays: faces are lists of 0-based vertex indices.
+
+    ``face_material`` is -1 for faces before any ``usemtl`` (black: Kd 0, Ke 0).
+    ``warnings`` holds notes about input that was read but is surprising (the scene reports
+    them as notes and ``RadiosityWarning``\\ s).
+    """
 
     path: Path
     vertices: np.ndarray
@@ -56,27 +83,72 @@ def _floats(tokens: list[str], count: int, where: str, what: str) -> list[float]
     return values
 
 
-def _read_text(path: Path, what: str, referenced_from: str = "") -> list[str]:
+def _is_binary(data: bytes) -> bool:
+    head = data[:_SNIFF_BYTES]
+    if b"\0" in data:
+        return True
+    control = sum(1 for b in head if b < 32 and b not in (9, 10, 12, 13))
+    return bool(head) and control > _BINARY_FRACTION * len(head)
+
+
+def _read_lines(path: Path, what: str, referenced_from: str = "", notes: list[str] | None = None
+                ) -> list[tuple[int, str]]:
+    """(line number, text without comment) of each logical line; continuations joined."""
+    origin = f"{referenced_from}: " if referenced_from else ""
     try:
         data = path.read_bytes()
     except FileNotFoundError:
-        origin = f"{referenced_from}: " if referenced_from else ""
         raise SceneError(f"{origin}{what} file '{path}' does not exist") from None
+    except IsADirectoryError:
+        raise SceneError(f"{origin}{what} file '{path}' is a folder, not a file") from None
     except OSError as exc:
-        raise SceneError(f"cannot read {what} file '{path}': {exc.strerror}") from None
-    if b"\0" in data[:4096]:
+        raise SceneError(f"{origin}cannot read {what} file '{path}': {exc.strerror or exc}") from None
+    except ValueError as exc:  # e.g. a NUL byte in a file name taken from an OBJ
+        raise SceneError(f"{origin}cannot read {what} file {str(path)!r}: {exc}") from None
+    if _is_binary(data):
         raise SceneError(f"{path}: is not a text {what} file (binary data)")
-    return data.decode("utf-8", errors="replace").splitlines()
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        text = data.decode("latin-1")
+        if notes is not None:
+            notes.append(f"{path}: is not UTF-8 (byte {exc.start}); read as Latin-1")
+    if "\n" not in text and "\r" in text:
+        raw_lines = text.split("\r")  # classic Mac line endings
+    else:
+        raw_lines = text.split("\n")
+    out: list[tuple[int, str]] = []
+    pending: list[str] = []
+    start = 0
+    for number, raw in enumerate(raw_lines, start=1):
+        raw = raw.rstrip("\r")
+        if not pending:
+            start = number
+        if raw.endswith("\\"):
+            pending.append(raw[:-1])
+            continue
+        pending.append(raw)
+        line = " ".join(pending).split("#", 1)[0].strip()
+        pending = []
+        if line:
+            out.append((start, line))
+    if pending:
+        line = " ".join(pending).split("#", 1)[0].strip()
+        if line:
+            out.append((start, line))
+    return out
 
 
-def read_mtl(path: Path, referenced_from: str = "") -> dict[str, Material]:
-    """Materials of an MTL file by name; ``Kd`` and ``Ke`` per channel, the rest ignored."""
+def read_mtl(path: Path, referenced_from: str = "", notes: list[str] | None = None) -> dict[str, Material]:
+    """Materials of an MTL file by name; ``Kd`` and ``Ke`` per channel, the rest ignored.
+
+    ``Kd``/``Ke`` take one number (grey) or three (RGB); a later ``newmtl`` of the same name
+    replaces an earlier one.
+    """
+    path = Path(path)
     materials: dict[str, Material] = {}
     current: Material | None = None
-    for number, raw in enumerate(_read_text(path, "MTL", referenced_from), start=1):
-        line = raw.split("#", 1)[0].strip()
-        if not line:
-            continue
+    for number, line in _read_lines(path, "MTL", referenced_from, notes):
         keyword, *tokens = line.split()
         where = f"{path}:{number}"
         if keyword == "newmtl":
@@ -89,10 +161,10 @@ def read_mtl(path: Path, referenced_from: str = "") -> dict[str, Material]:
                 raise SceneError(f"{where}: {keyword} appears before any newmtl")
             if tokens and tokens[0] in ("spectral", "xyz"):
                 raise SceneError(f"{where}: {keyword} {tokens[0]} is not supported; give RGB values")
-            values = _floats(tokens, 1, where, keyword)
-            if len(tokens) >= 3:
-                values = _floats(tokens, 3, where, keyword)
-            else:
+            if len(tokens) == 2:
+                raise SceneError(f"{where}: {keyword} needs 1 number (grey) or 3 (RGB), got 2: {' '.join(tokens)!r}")
+            values = _floats(tokens, 3 if len(tokens) >= 3 else 1, where, keyword)
+            if len(values) == 1:
                 values = values * 3
             setattr(current, keyword.lower(), tuple(values))
     return materials
@@ -104,48 +176,76 @@ def _face_index(token: str, n_vertices: int, where: str, face_number: int) -> in
         index = int(head)
     except ValueError:
         raise SceneError(f"{where}: face {face_number} has a bad vertex reference {token!r}") from None
+    if index == 0:
+        raise SceneError(f"{where}: face {face_number} uses vertex 0, but OBJ vertex numbers start at 1")
     resolved = index - 1 if index > 0 else n_vertices + index
-    if index == 0 or not 0 <= resolved < n_vertices:
+    if not 0 <= resolved < n_vertices:
         msg = (f"{where}: face {face_number} uses vertex {index}, "
                f"but {n_vertices} vertices are defined before this line")
         raise SceneError(msg)
     return resolved
 
 
+def _mtl_paths(folder: Path, tokens: list[str]) -> list[Path]:
+    """``mtllib a.mtl b.mtl`` names two files; a single name may contain spaces."""
+    whole = folder / " ".join(tokens)
+    if len(tokens) == 1 or whole.exists():
+        return [whole]
+    return [folder / t for t in tokens]
+
+
 def read_obj(path) -> ObjData:
     """Read an OBJ file (and the MTL files it names) into arrays.
+
+    Parameters
+    ----------
+    path : str or Path
+        The OBJ file; ``mtllib`` names are relative to its folder.
+
+    Returns
+    -------
+    ObjData
 
     Raises
     ------
     SceneError
-        The file or a referenced MTL is missing or malformed; the message gives file:line.
+        The file or a referenced MTL is missing, unreadable or malformed, a face uses a vertex
+        that does not exist, a material is unknown, or there are no faces; the message gives
+        ``file:line``.
     """
     path = Path(path)
-    lines = _read_text(path, "OBJ")
+    notes: list[str] = []
+    lines = _read_lines(path, "OBJ", notes=notes)
     vertices: list[list[float]] = []
     faces: list[np.ndarray] = []
     face_object: list[int] = []
-    face_material: list[int] = []
+    face_material: list[int] = []  # index into material_names, resolved at the end
     face_line: list[int] = []
     objects: list[str] = []
     object_index: dict[str, int] = {}
     library: dict[str, Material] = {}
-    used: list[Material] = []
-    used_index: dict[str, int] = {}
+    material_names: list[str] = []
+    material_id: dict[str, int] = {}
+    material_first_use: dict[str, str] = {}
+    ignored: dict[str, int] = {}
     current_object = -1
     current_material = -1
-    for number, raw in enumerate(lines, start=1):
-        line = raw.split("#", 1)[0].strip()
-        if not line:
-            continue
+    for number, line in lines:
         keyword, *tokens = line.split()
         where = f"{path}:{number}"
         if keyword == "v":
-            vertices.append(_floats(tokens, 3, where, "vertex"))
+            xyz = _floats(tokens, 3, where, "vertex")
+            if max(abs(c) for c in xyz) > MAX_COORDINATE:
+                raise SceneError(f"{where}: vertex {len(vertices) + 1} has a coordinate beyond "
+                                 f"{MAX_COORDINATE:g}: {' '.join(tokens[:3])!r}")
+            vertices.append(xyz)
         elif keyword == "f":
+            face_number = len(faces) + 1
             if len(tokens) < 3:
-                raise SceneError(f"{where}: face {len(faces) + 1} has {len(tokens)} vertices; a face needs at least 3")
-            idx = [_face_index(t, len(vertices), where, len(faces) + 1) for t in tokens]
+                raise SceneError(f"{where}: face {face_number} has {len(tokens)} vertices; a face needs at least 3")
+            idx = [_face_index(t, len(vertices), where, face_number) for t in tokens]
+            # Drop repeated consecutive vertices (f 1 2 2 3); a face left with < 3 has zero area.
+            idx = [v for k, v in enumerate(idx) if v != idx[k - 1]] or idx[:1]
             if current_object < 0:
                 current_object = object_index.setdefault(path.stem, len(objects))
                 if current_object == len(objects):
@@ -163,27 +263,50 @@ def read_obj(path) -> ObjData:
         elif keyword == "mtllib":
             if not tokens:
                 raise SceneError(f"{where}: mtllib needs a file name")
-            library.update(read_mtl(path.parent / " ".join(tokens), referenced_from=where))
+            for mtl in _mtl_paths(path.parent, tokens):
+                library.update(read_mtl(mtl, referenced_from=where, notes=notes))
         elif keyword == "usemtl":
+            if not tokens:
+                raise SceneError(f"{where}: usemtl needs a material name")
             name = " ".join(tokens)
-            if name not in library:
-                known = ", ".join(sorted(library)) or "none (no mtllib before this line)"
-                raise SceneError(f"{where}: unknown material {name!r}; defined: {known}")
-            if name not in used_index:
-                used_index[name] = len(used)
-                used.append(library[name])
-            current_material = used_index[name]
+            if name not in material_id:
+                material_first_use[name] = where
+                material_id[name] = len(material_names)
+                material_names.append(name)
+            current_material = material_id[name]
+        elif keyword in _IGNORED_ELEMENTS:
+            ignored[keyword] = ignored.get(keyword, 0) + 1
     if not faces:
-        raise SceneError(f"{path}: the scene has no faces")
+        raise SceneError(f"{path}: the scene has no faces (no 'f' lines)")
+
+    # Materials are resolved after the whole file is read: mtllib may come after usemtl.
+    used_materials = sorted({m for m in face_material if m >= 0})
+    for m in used_materials:
+        name = material_names[m]
+        if name not in library:
+            known = ", ".join(sorted(library)) or "none (no mtllib in the file)"
+            raise SceneError(f"{material_first_use[name]}: unknown material {name!r}; defined: {known}")
+    material_remap = {old: new for new, old in enumerate(used_materials)}
+    material_remap[-1] = -1
+
     used_objects = sorted(set(face_object))
     remap = {old: new for new, old in enumerate(used_objects)}
+    n_bare = sum(1 for m in face_material if m < 0)
+    if n_bare:
+        first = face_line[face_material.index(-1)]
+        notes.append(f"{path}:{first}: {n_bare} face(s) come before any usemtl and have no material; "
+                     "they absorb everything and emit nothing (Kd 0, Ke 0)")
+    for keyword, count in ignored.items():
+        notes.append(f"{path}: {count} '{keyword}' ({_IGNORED_ELEMENTS[keyword]}) element(s) ignored; "
+                     "only faces take part in radiosity")
     return ObjData(
         path=path,
         vertices=np.asarray(vertices, dtype=float).reshape(-1, 3),
         faces=faces,
         face_object=np.asarray([remap[o] for o in face_object], dtype=np.int64),
-        face_material=np.asarray(face_material, dtype=np.int64),
+        face_material=np.asarray([material_remap[m] for m in face_material], dtype=np.int64),
         face_line=np.asarray(face_line, dtype=np.int64),
         objects=[objects[o] for o in used_objects],
-        materials=used,
+        materials=[library[material_names[m]] for m in used_materials],
+        warnings=notes,
     )
