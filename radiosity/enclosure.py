@@ -13,8 +13,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import warnings
+
 import numpy as np
 import scipy.sparse as sp
+
+from ._errors import RadiosityWarning
 
 __all__ = ["Diagnostics", "diagnose", "enforce_reciprocity"]
 
@@ -97,5 +101,9 @@ def enforce_reciprocity(F: sp.spmatrix, area: np.ndarray, *, closure: bool = Fal
             if np.all(np.abs(row - area) <= rtol * area):
                 break
             d = d * np.sqrt(area / np.where(row > 0, row, area))
+        else:
+            worst = float(np.abs(row / area - 1).max())
+            warnings.warn(f"closure could not be enforced (worst row off by {worst:.2g} after {maxiter} "
+                          "scalings): the scene is probably not a closed enclosure", RadiosityWarning, stacklevel=2)
         G = (sp.diags(d) @ G @ sp.diags(d)).tocsr()
     return (sp.diags(1.0 / area) @ G).tocsr()

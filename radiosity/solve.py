@@ -114,22 +114,44 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     options = Options.from_preset(preset, **overrides)
     prepared = prepare(scene, options)
     cut = prepared.scene
+    F = _without(prepared.F, cut.patch_obstruction)
     t0 = time.perf_counter()
-    radiosity, report = solve_system(prepared.F, cut.reflectance, cut.emission, cut.patch_area,
+    radiosity, report = solve_system(F, cut.reflectance, cut.emission, cut.patch_area,
                                      method=options.solver, rtol=options.rtol)
     timings = dict(prepared.timings)
     timings["solve"] = time.perf_counter() - t0
-    balance = energy_balance(prepared.F, cut.patch_area, cut.reflectance, cut.emission, radiosity)
-    return Solution(scene=cut, radiosity=radiosity, F=prepared.F, options=options, timings=timings,
+    balance = energy_balance(F, cut.patch_area, cut.reflectance, cut.emission, radiosity)
+    return Solution(scene=cut, radiosity=radiosity, F=F, options=options, timings=timings,
                     fill=prepared.stats, solver=report, energy=balance, cache_hit=prepared.cache_hit)
 
 
-def view_factors(scene: Scene, *, preset: str = "default", **overrides) -> sp.csr_matrix:
+def _without(F: sp.csr_matrix, inactive: np.ndarray) -> sp.csr_matrix:
+    """F with the rows and columns of inactive patches (obstructions) set to zero."""
+    if not inactive.any():
+        return F
+    keep = sp.diags((~inactive).astype(float))
+    return (keep @ F @ keep).tocsr()
+
+
+def view_factors(scene: Scene, *, preset: str = "default", enforce: str = "none", **overrides) -> sp.csr_matrix:
     """The patch-to-patch view-factor matrix F with occlusion: F[i, j] = F(i -> j).
 
     Row i holds the fractions of patch i's emitted power reaching each patch j. The patches
     are the scene's as loaded (``max_patch_size`` at load time), unless ``max_patch_size`` is
-    given here; unlike :func:`solve`, presets never cut patches further.
+    given here; unlike :func:`solve`, presets never cut patches further. Obstructions (View3D
+    ``O`` surfaces) block but have zero rows and columns.
+
+    Parameters
+    ----------
+    scene : Scene
+    preset : {"draft", "default", "fine"}, default: "default"
+        Quadrature and visibility accuracy.
+    enforce : {"none", "reciprocity", "closure"}, default: "none"
+        Make ``A_i F_ij = A_j F_ji`` exact by symmetrising exchange areas; ``"closure"`` also
+        scales them symmetrically so rows sum to 1 (closed enclosures only). See
+        :mod:`radiosity.enclosure`.
+    **overrides
+        Fields of :class:`radiosity.options.Options`.
 
     Examples
     --------
@@ -139,7 +161,15 @@ def view_factors(scene: Scene, *, preset: str = "default", **overrides) -> sp.cs
     >>> bool(np.allclose(F.sum(axis=1), 1.0, atol=1e-6))
     True
     """
+    from .enclosure import enforce_reciprocity
+
+    if enforce not in ("none", "reciprocity", "closure"):
+        raise TypeError(f"unknown enforce {enforce!r}; valid: none, reciprocity, closure")
     options = Options.from_preset(preset, **overrides)
     if options.max_patch_size is None:
         options = Options.from_preset(preset, **{**overrides, "patch_size_rel": np.inf})
-    return prepare(scene, options).F
+    prepared = prepare(scene, options)
+    F = _without(prepared.F, prepared.scene.patch_obstruction)
+    if enforce != "none":
+        F = enforce_reciprocity(F, prepared.scene.patch_area, closure=enforce == "closure")
+    return F
