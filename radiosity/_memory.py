@@ -1,35 +1,191 @@
-"""Memory estimates made before big allocations, so impossible requests are refused early."""
+"""Memory estimates made before big allocations, so impossible requests are refused early.
+
+A run that needs more memory than the machine has is refused with a ``MemoryBudgetError``
+that gives the estimate, the budget and the knob to turn, before the allocation, instead of
+being killed by the operating system halfway through.
+
+The budget is ``MEMORY_FRACTION`` (``_tol.py``) of the machine's memory, or of the container's
+limit (cgroup ``memory.max``) if lower. The environment variable ``RADIOSITY_MEMORY_BUDGET``
+(bytes, or with a ``K``, ``M`` or ``G`` suffix) replaces it: a test hook that forces the
+refusal on a small scene, and a way to keep a shared machine usable.
+"""
 
 from __future__ import annotations
 
+import math
 import os
+from pathlib import Path
 
 from . import _tol
 from ._errors import MemoryBudgetError
 
-# Bytes per stored view factor in CSR (float64 value + int32 column) plus the COO build copy.
+__all__ = ["ENV_BUDGET", "budget_bytes", "check", "check_fill", "check_solve", "check_rays",
+           "fill_bytes", "solve_bytes", "format_bytes"]
+
+ENV_BUDGET = "RADIOSITY_MEMORY_BUDGET"
+
+# Bytes per stored view factor while F is built: the per-block COO parts (int64 i, j and
+# float64 value, 24 bytes), their concatenation's int32/float64 CSR result (12 bytes), with
+# the parts freed block by block. Multiplied by the worst case of n^2 non-zeros (every pair
+# facing), so the estimate is an upper bound: real scenes fill 30-70% of the pairs.
 BYTES_PER_FACTOR = 8 + 4 + 8 + 8 + 8
+
+# Bytes per non-zero of F during a solve: the operator I - rho F (CSR, 12 bytes) and the
+# product rho F it is built from (12 bytes), next to F itself (already counted by the fill).
+SOLVE_BYTES_PER_FACTOR = 24
+
+# A sparse LU of the radiosity system fills in to nearly dense: L and U, float64 each.
+DIRECT_BYTES_PER_PAIR = 16
+
+# Bytes per shadow ray in flight: float64 origins, ends and directions (72), their float32
+# copies for Embree (24), distances and weights (~24), with headroom for temporaries.
+BYTES_PER_RAY = 160
+
+# The knob to turn, worded for both the Python API and the command line.
+_COARSER = "use a coarser preset (--preset draft) or a larger max_patch_size (--max-patch-size)"
+_SUFFIXES = {"": 1, "k": 1 << 10, "m": 1 << 20, "g": 1 << 30, "t": 1 << 40}
+
+
+def format_bytes(n: float) -> str:
+    """``n`` bytes in a readable unit: ``'3.2 GiB'``, ``'640 MiB'``, ``'12 KiB'``."""
+    for unit, size in (("TiB", 1 << 40), ("GiB", 1 << 30), ("MiB", 1 << 20), ("KiB", 1 << 10)):
+        if n >= size:
+            return f"{n / size:.3g} {unit}"
+    return f"{int(n)} bytes"
+
+
+def _cgroup_limit() -> int | None:
+    for path in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            text = Path(path).read_text().strip()
+        except OSError:
+            continue
+        if text.isdigit() and int(text) < 1 << 60:
+            return int(text)
+    return None
 
 
 def available_bytes() -> int:
-    """Physical memory of the machine (the budget is a fraction of it)."""
+    """Physical memory of the machine, or the container's limit if lower."""
     try:
-        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+        physical = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     except (ValueError, OSError, AttributeError):  # pragma: no cover - non-POSIX
-        return 8 << 30
+        physical = 8 << 30
+    limit = _cgroup_limit()
+    return min(physical, limit) if limit else physical
 
 
-def check_fill(n_patches: int, *, budget: int | None = None) -> int:
+def _parse_bytes(text: str) -> int:
+    t = text.strip().lower().removesuffix("ib").removesuffix("b")
+    suffix = t[-1:] if t[-1:] in _SUFFIXES and t[-1:] else ""
+    try:
+        value = float(t[: len(t) - len(suffix)]) * _SUFFIXES[suffix]
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value >= 0):
+        raise ValueError(f"{ENV_BUDGET} must be a number of bytes (e.g. 500M, 4G), got {text!r}")
+    return int(value)
+
+
+def budget_bytes() -> tuple[int, str]:
+    """The memory budget in bytes and where it comes from (for the message)."""
+    env = os.environ.get(ENV_BUDGET)
+    if env:
+        return _parse_bytes(env), f"set by {ENV_BUDGET}"
+    total = available_bytes()
+    return int(_tol.MEMORY_FRACTION * total), f"{_tol.MEMORY_FRACTION:.0%} of {format_bytes(total)}"
+
+
+def check(what: str, estimate: int, knob: str, *, budget: int | None = None) -> int:
+    """Raise ``MemoryBudgetError`` if ``estimate`` bytes exceed the budget; return the estimate.
+
+    Parameters
+    ----------
+    what : str
+        What would be allocated, e.g. ``"the view-factor matrix of 40,000 patches"``.
+    estimate : int
+        Bytes it needs (an upper bound).
+    knob : str
+        What the user can change so it fits, e.g. ``"use a coarser preset"``.
+    budget : int, optional
+        Bytes allowed; default: :func:`budget_bytes`.
+    """
+    source = "given"
+    if budget is None:
+        budget, source = budget_bytes()
+    if estimate > budget:
+        msg = (f"{what} needs up to {format_bytes(estimate)} of memory, more than the "
+               f"{format_bytes(budget)} budget ({source}); {knob}")
+        raise MemoryBudgetError(msg)
+    return estimate
+
+
+def fill_bytes(n_patches: int) -> int:
+    """Worst-case bytes of building the view-factor matrix of ``n_patches`` patches."""
+    return int(n_patches) ** 2 * BYTES_PER_FACTOR
+
+
+def check_fill(n_patches: int, *, budget: int | None = None, patch_size: float | None = None) -> int:
     """Estimate the worst-case bytes of the view-factor fill; raise if over budget.
 
     The worst case is every pair non-zero (a scene with no back-facing pairs): the sparse
     matrix then holds n^2 factors. Returns the estimate in bytes.
+
+    Parameters
+    ----------
+    n_patches : int
+    budget : int, optional
+        Bytes allowed; default: :func:`budget_bytes`.
+    patch_size : float, optional
+        The patch size (metres) that gave ``n_patches``; the message then suggests one that fits
+        (the patch count falls with the square of the size, the fill with its fourth power).
+
+    Examples
+    --------
+    >>> check_fill(100, budget=10**9)
+    360000
     """
-    estimate = n_patches**2 * BYTES_PER_FACTOR
-    budget = int(_tol.MEMORY_FRACTION * available_bytes()) if budget is None else budget
-    if estimate > budget:
-        msg = (f"{n_patches} patches need up to {estimate / 2**30:.1f} GiB for the view-factor matrix, "
-               f"more than the {budget / 2**30:.1f} GiB available; use a coarser preset or a larger "
-               "max_patch_size (patch count falls with its square)")
-        raise MemoryBudgetError(msg)
+    estimate = fill_bytes(n_patches)
+    knob = _COARSER + " (the patch count falls with its square)"
+    effective = budget if budget is not None else budget_bytes()[0]
+    if patch_size and estimate > effective > 0:
+        fits = patch_size * (estimate / effective) ** 0.25
+        knob = f"{_COARSER}; about {_round_up(fits):g} m would fit (now {patch_size:.3g} m)"
+    return check(f"the view-factor matrix of {n_patches:,} patches", estimate, knob, budget=budget)
+
+
+def _round_up(x: float) -> float:
+    """``x`` rounded up to two significant figures."""
+    if x <= 0 or not math.isfinite(x):
+        return x
+    scale = 10 ** (math.floor(math.log10(x)) - 1)
+    return math.ceil(x / scale - 1e-9) * scale
+
+
+def solve_bytes(n_patches: int, nnz: int, method: str = "auto") -> int:
+    """Bytes the radiosity solve allocates next to F (operator copies, LU fill-in)."""
+    estimate = int(nnz) * SOLVE_BYTES_PER_FACTOR + 16 * 8 * int(n_patches)
+    if method == "direct":
+        estimate += DIRECT_BYTES_PER_PAIR * int(n_patches) ** 2
     return estimate
+
+
+def check_solve(n_patches: int, nnz: int, method: str = "auto", *, budget: int | None = None) -> int:
+    """Raise before a solve that would not fit (a direct LU of a large system, mostly).
+
+    Examples
+    --------
+    >>> check_solve(1000, 10**5, "bicgstab", budget=10**9)
+    2528000
+    """
+    knob = _COARSER
+    if method == "direct":
+        knob = "use an iterative solver (--solver bicgstab) or " + _COARSER.removeprefix("use ")
+    return check(f"the {method} solve of {n_patches:,} patches", solve_bytes(n_patches, nnz, method), knob,
+                 budget=budget)
+
+
+def check_rays(n_rays: int, *, budget: int | None = None) -> int:
+    """Raise before a batch of ``n_rays`` shadow rays that would not fit in memory."""
+    return check(f"a batch of {n_rays:,} shadow rays", int(n_rays) * BYTES_PER_RAY,
+                 "use fewer visibility samples (--preset draft)", budget=budget)

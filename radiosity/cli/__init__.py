@@ -1,8 +1,13 @@
 """The ``radiosity`` command: solve, view, viewfactors. ``main(argv)`` returns the exit code.
 
-Bad input (a ``RadiosityError`` or ``ValueError``) ends with one line on stderr and exit
-status 2; ``--debug`` shows the traceback instead. Anything else is a bug and shows its
-traceback.
+Bad input (a ``RadiosityError``, ``ValueError`` or ``OSError``, a request too big for the
+machine, a bad command line) ends with exactly one line on stderr, ``radiosity: error: ...``,
+and exit status 2; ``--debug`` shows the traceback instead. Ctrl-C ends with one line and
+exit status 130; outputs are written through a staging folder and the cache atomically, so
+neither is left half-written. Anything else is a bug and shows its traceback.
+
+Scene notes (``RadiosityWarning``: a non-planar face split, no emitter, ...) are printed by
+``solve`` in its summary; other commands print them on stderr as ``radiosity: note: ...``.
 """
 
 from __future__ import annotations
@@ -11,17 +16,33 @@ import argparse
 import sys
 import warnings
 
-from .._errors import RadiosityError, RadiosityWarning
+from .._errors import MemoryBudgetError, RadiosityError, RadiosityWarning
 from . import _solve, _view, _viewfactors
 
 __all__ = ["main"]
 
+EXIT_OK = 0
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130
+PROG = "radiosity"
+
+_OUT_OF_MEMORY_HINT = ("use a coarser preset (--preset draft) or a larger --max-patch-size; "
+                       "RADIOSITY_MEMORY_BUDGET (bytes) makes the check before allocation stricter")
+
+
+class UsageError(Exception):
+    """A bad command line (unknown option, missing argument, bad value)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose errors are one line, handled by ``main`` like any bad input."""
+
+    def error(self, message: str):  # noqa: D102 - argparse hook
+        raise UsageError(f"{message} (see '{self.prog} --help')")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="radiosity", description=__doc__.splitlines()[0])
+    parser = _Parser(prog=PROG, description=__doc__.splitlines()[0])
     parser.add_argument("--debug", action="store_true", help="show tracebacks for bad input")
     sub = parser.add_subparsers(dest="command", required=True)
     for module in (_solve, _view, _viewfactors):
@@ -29,22 +50,68 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                        help="show tracebacks for bad input")
         module.add_args(p)
-        p.set_defaults(run=module.run)
+        p.set_defaults(run=module.run, shows_notes=getattr(module, "SHOWS_NOTES", False))
     return parser
 
 
+def _one_line(exc: BaseException) -> str:
+    """The first line of an exception's message; OSErrors as 'file: reason'."""
+    if isinstance(exc, OSError) and exc.strerror:
+        where = exc.filename if exc.filename is not None else ""
+        text = f"{where}: {exc.strerror}" if where else exc.strerror
+    else:
+        text = str(exc)
+    lines = [line for line in text.splitlines() if line.strip()]
+    return lines[0].strip() if lines else type(exc).__name__
+
+
+def _error(message: str) -> int:
+    print(f"{PROG}: error: {message}", file=sys.stderr)
+    return EXIT_BAD_INPUT
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run the command line; returns the exit status (0 ok, 2 bad input, 130 interrupted)."""
     parser = build_parser()
-    args = parser.parse_args(argv)
-    warnings.simplefilter("ignore", RadiosityWarning)  # the summary lists them as notes
     try:
-        return int(args.run(args))
-    except (RadiosityError, ValueError, MemoryError, OSError) as exc:
+        args = parser.parse_args(argv)
+    except UsageError as exc:
+        return _error(str(exc))
+    except SystemExit as exc:  # --help
+        return exc.code if isinstance(exc.code, int) else EXIT_OK
+    caught: list[warnings.WarningMessage] = []
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", RadiosityWarning)
+            code = int(args.run(args))
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted; earlier outputs and the cache are left as they were", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except MemoryBudgetError as exc:
         if args.debug:
             raise
-        message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        print(f"radiosity: error: {message}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        print("radiosity: interrupted; outputs and cache left as they were", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return _error(_one_line(exc))
+    except MemoryError as exc:
+        if args.debug:
+            raise
+        detail = _one_line(exc) if str(exc) else "an allocation failed"
+        return _error(f"ran out of memory ({detail}); {_OUT_OF_MEMORY_HINT}")
+    except (RadiosityError, ValueError, OSError) as exc:
+        if args.debug:
+            raise
+        return _error(_one_line(exc))
+    _report_warnings(caught, show_notes=not args.shows_notes)
+    return code
+
+
+def _report_warnings(caught, *, show_notes: bool) -> None:
+    """Print scene notes on stderr (unless the command printed them) and re-issue other warnings."""
+    seen = set()
+    for w in caught:
+        if issubclass(w.category, RadiosityWarning):
+            text = str(w.message)
+            if show_notes and text not in seen:
+                print(f"{PROG}: note: {text}", file=sys.stderr)
+            seen.add(text)
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)

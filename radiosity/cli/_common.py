@@ -1,11 +1,23 @@
-"""Arguments shared by subcommands."""
+"""Arguments shared by subcommands, and loading the scene they name."""
 
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from ..scene import UNITS, bundled_scene, load_scene
+
+
+def positive_metres(text: str) -> float:
+    """argparse type: a positive, finite number of metres."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a positive number of metres, got {text!r}")
+    return value
 
 
 def add_scene_args(parser: argparse.ArgumentParser, *, optional_scene: bool) -> None:
@@ -14,9 +26,11 @@ def add_scene_args(parser: argparse.ArgumentParser, *, optional_scene: bool) -> 
                         help="OBJ file (with its MTL)" + ("; default: the bundled Cornell box" if optional_scene else ""))
     parser.add_argument("--preset", choices=("draft", "default", "fine"), default="default",
                         help="speed/accuracy trade (default: %(default)s)")
-    parser.add_argument("--max-patch-size", type=float, default=None, metavar="METRES",
+    parser.add_argument("--max-patch-size", type=positive_metres, default=None, metavar="METRES",
                         help="longest patch edge, overriding the preset")
-    parser.add_argument("--units", choices=tuple(UNITS), default="m", help="units of the OBJ coordinates")
+    parser.add_argument("--units", choices=tuple(UNITS), default=None,
+                        help="units of the OBJ coordinates (default: metres, with a warning if the "
+                             "scene is more than 50 m across)")
     parser.add_argument("--emission", choices=("radiance", "exitance"), default="radiance",
                         help="read Ke as radiance (E = pi Ke) or as exitance")
     parser.add_argument("--allow-clamp", action="store_true", help="clamp reflectances >= 1 instead of refusing")
@@ -25,7 +39,10 @@ def add_scene_args(parser: argparse.ArgumentParser, *, optional_scene: bool) -> 
 
 def load(args):
     path = args.scene if args.scene is not None else bundled_scene("cornell_box")
-    return load_scene(path, emission=args.emission, units=args.units, allow_clamp=args.allow_clamp)
+    options = {"allow_clamp": args.allow_clamp}
+    if args.units is not None:
+        options["units"] = args.units
+    return load_scene(path, emission=args.emission, **options)
 
 
 def overrides(args) -> dict:

@@ -8,12 +8,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.export import write_ply, write_png, write_summary, write_vtp
+from .._errors import SceneError
+from ..io.export import atomic_path, staged_outputs, write_ply, write_png, write_summary, write_vtp
 from ..solve import solve
 from ._common import add_scene_args, load, overrides
 
 NAME = "solve"
 HELP = "solve a scene's radiosity and write a picture, meshes and summary.json"
+SHOWS_NOTES = True  # the summary lists the scene's notes; main need not repeat them
 
 
 def add_args(parser) -> None:
@@ -52,10 +54,15 @@ def fmt3(v) -> str:
 
 
 def read_points(path: Path) -> np.ndarray:
-    from .._errors import SceneError
-
+    """Receiver points and normals (m, 6) from a text file, one 'x y z nx ny nz' per line."""
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise SceneError(f"points file '{path}' does not exist") from None
+    except OSError as exc:
+        raise SceneError(f"cannot read points file '{path}': {exc.strerror or exc}") from None
     rows = []
-    for number, line in enumerate(path.read_text().splitlines(), start=1):
+    for number, line in enumerate(data.decode("utf-8", errors="replace").splitlines(), start=1):
         text = line.split("#", 1)[0].strip().replace(",", " ")
         if not text:
             continue
@@ -65,9 +72,11 @@ def read_points(path: Path) -> np.ndarray:
             raise SceneError(f"{path}:{number}: expected 6 numbers 'x y z nx ny nz', got {line!r}") from None
         if len(values) != 6 or not np.isfinite(values).all():
             raise SceneError(f"{path}:{number}: expected 6 finite numbers 'x y z nx ny nz', got {line!r}")
+        if not any(values[3:]):
+            raise SceneError(f"{path}:{number}: the normal (nx ny nz) is zero")
         rows.append(values)
     if not rows:
-        raise SceneError(f"{path}: no points")
+        raise SceneError(f"{path}: no points (expected lines of 'x y z nx ny nz')")
     return np.asarray(rows)
 
 
@@ -76,23 +85,25 @@ def run(args) -> int:
     scene = load(args)
     points = read_points(args.points) if args.points else None
     load_seconds = time.perf_counter() - t0
-    solution = solve(scene, preset=args.preset, solver=args.solver, progress=sys.stderr.isatty(), **overrides(args))
     out = args.output
-    out.mkdir(parents=True, exist_ok=True)
-    write_vtp(solution, out / "solution.vtp")
-    write_ply(solution, out / "solution.ply")
-    summary = solution.summary()
-    if not args.no_picture:
-        summary["exposure"] = write_png(solution, out / "picture.png")
-    if points is not None:
-        h = solution.irradiance(points[:, :3], points[:, 3:])
-        from ..io.export import atomic_path
-
-        with atomic_path(out / "irradiance.csv") as tmp:
-            np.savetxt(tmp, np.column_stack([points, h]), delimiter=",", fmt="%.9g",
-                       header="x,y,z,nx,ny,nz,H_r,H_g,H_b (W/m^2)", comments="")
-    write_summary(summary, out / "summary.json")
+    written = ["solution.vtp", "solution.ply"] + ([] if args.no_picture else ["picture.png"])
+    written += (["irradiance.csv"] if points is not None else []) + ["summary.json"]
+    # Everything goes to a staging folder first and is moved into OUTDIR only when all of it is
+    # written: a failed or interrupted run leaves an earlier run's outputs as they were.
+    with staged_outputs(out) as stage:
+        solution = solve(scene, preset=args.preset, solver=args.solver, progress=sys.stderr.isatty(),
+                         **overrides(args))
+        h = solution.irradiance(points[:, :3], points[:, 3:]) if points is not None else None
+        summary = solution.summary()
+        write_vtp(solution, stage / "solution.vtp")
+        write_ply(solution, stage / "solution.ply")
+        if not args.no_picture:
+            summary["exposure"] = write_png(solution, stage / "picture.png")
+        if h is not None:
+            with atomic_path(stage / "irradiance.csv") as tmp:
+                np.savetxt(tmp, np.column_stack([points, h]), delimiter=",", fmt="%.9g",
+                           header="x,y,z,nx,ny,nz,H_r,H_g,H_b (W/m^2)", comments="")
+        write_summary(summary, stage / "summary.json")
     print(format_summary(solution, load_seconds))
-    print(f"wrote      {out}/: picture.png solution.vtp solution.ply summary.json"
-          + (" irradiance.csv" if points is not None else ""))
+    print(f"wrote      {out}/: {' '.join(written)}")
     return 0

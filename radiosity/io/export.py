@@ -7,15 +7,17 @@ an interrupted or failed run never leaves a half-written file or destroys an ear
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["atomic_path", "write_summary", "write_ply", "write_vtp", "write_png", "write_view_factors"]
+__all__ = ["atomic_path", "staged_outputs", "write_summary", "write_ply", "write_vtp", "write_png", "write_view_factors"]
 
 
 @contextlib.contextmanager
@@ -34,6 +36,46 @@ def atomic_path(target: str | Path):
     finally:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+
+
+STAGING_PREFIX = ".radiosity-partial-"
+
+
+@contextlib.contextmanager
+def staged_outputs(folder: str | Path):
+    """Yield a hidden staging folder inside ``folder``; move its files into ``folder`` on success.
+
+    Every output of a run is written into the staging folder first. Only when the whole block
+    succeeds are the files renamed into ``folder`` (each rename is atomic), so a run that fails
+    or is interrupted leaves the outputs of an earlier run untouched, not a mix of old and new.
+    The folder is created (and checked for writing) on entry, before any long computation; if
+    it was created here and the run fails, it is removed again.
+
+    Raises
+    ------
+    NotADirectoryError
+        ``folder`` exists and is not a folder.
+    OSError
+        ``folder`` cannot be created or written to.
+    """
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise NotADirectoryError(errno.ENOTDIR, "exists and is not a folder; give -o a folder", str(folder))
+    created = not folder.exists()
+    folder.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(dir=folder, prefix=STAGING_PREFIX))
+    ok = False
+    try:
+        yield stage
+        for item in sorted(stage.iterdir()):
+            if not item.name.startswith("."):
+                os.replace(item, folder / item.name)
+        ok = True
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+        if not ok and created:
+            with contextlib.suppress(OSError):
+                folder.rmdir()  # only if empty
 
 
 def write_summary(summary: dict, path: str | Path) -> None:
