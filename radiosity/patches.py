@@ -8,7 +8,7 @@ from (trimesh's ``return_index`` idea), which in turn maps to its object and mat
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -24,6 +24,12 @@ class Patches:
 
     quads: np.ndarray  # (n, 4, 3) float, triangles repeat the third vertex
     patch_face: np.ndarray  # (n,) int, index of the source face
+    # (n,) bool: covered by another object (imprint.py); never receives or sends light.
+    patch_hidden: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+
+    def __post_init__(self):
+        if len(self.patch_hidden) != len(self.quads):
+            object.__setattr__(self, "patch_hidden", np.zeros(len(self.quads), bool))
 
     @property
     def n_patches(self) -> int:
@@ -49,17 +55,47 @@ def _is_convex(poly: np.ndarray, normal: np.ndarray) -> bool:
     return bool((turns > 0).all())
 
 
-def _split_triangle(tri: np.ndarray, k: int) -> np.ndarray:
-    """k*k similar triangles of one triangle, same winding."""
-    a, b, c = tri
-    i, j = np.meshgrid(np.arange(k + 1), np.arange(k + 1), indexing="ij")
-    grid = a + (i[..., None] / k) * (b - a) + (j[..., None] / k) * (c - a)
-    up_i, up_j = np.nonzero(i[:k, :k] + j[:k, :k] <= k - 1)
-    down_i, down_j = np.nonzero(i[:k, :k] + j[:k, :k] <= k - 2)
-    up = np.stack([grid[up_i, up_j], grid[up_i + 1, up_j], grid[up_i, up_j + 1]], axis=1)
-    down = np.stack([grid[down_i + 1, down_j], grid[down_i + 1, down_j + 1], grid[down_i, down_j + 1]], axis=1)
-    tris = np.concatenate([up, down], axis=0)
-    return np.concatenate([tris, tris[:, 2:3]], axis=1)
+def _split_triangle(tri: np.ndarray, max_size: float | None) -> np.ndarray:
+    """Cells of a triangle no longer than ``max_size``, as few as the candidate splits allow.
+
+    Candidates: (1) for each vertex ``c``, the bilinear grid of the quad ``(a, b, c, c)``
+    collapsed at ``c``: ``ku`` columns along the opposite edge ``ab`` and ``kv`` rows towards
+    ``c``; every cell is a trapezoid (rows are parallel to ``ab``) or, next to ``c``, a
+    triangle; row edges are at most ``|ab| / ku``, the others at most ``max(|ca|, |cb|) / kv``.
+    A sliver gets one strip of cells instead of ``k**2`` smaller slivers. (2) Three quads
+    through the centroid and the edge midpoints, each cut on its bilinear grid: about 1.5
+    times the ideal count for a well-shaped triangle. The split with fewest cells wins (ties:
+    the first). Same winding; an unsplit triangle is returned as it is.
+    """
+    if max_size is None:
+        return np.concatenate([tri, tri[2:3]])[None]
+    best = None
+    for first in range(3):
+        a, b, c = tri[first], tri[(first + 1) % 3], tri[(first + 2) % 3]
+        ku = _cuts(float(np.linalg.norm(b - a)), max_size)
+        kv = _cuts(max(float(np.linalg.norm(c - a)), float(np.linalg.norm(c - b))), max_size)
+        if ku == 1 and kv == 1:
+            return np.concatenate([tri, tri[2:3]])[None]
+        if best is None or ku * kv < best[0]:
+            best = (ku * kv, first, ku, kv)
+    centre = tri.mean(axis=0)
+    mids = 0.5 * (tri + np.roll(tri, -1, axis=0))  # mids[i] between tri[i] and tri[i + 1]
+    quads = [np.stack([tri[i], mids[i], centre, mids[i - 1]]) for i in range(3)]
+    counts = [(_quad_cuts(q, max_size)) for q in quads]
+    if sum(ku * kv for ku, kv in counts) < best[0]:
+        return np.concatenate([_split_quad(q, ku, kv) for q, (ku, kv) in zip(quads, counts)])
+    _, first, ku, kv = best
+    a, b, c = tri[first], tri[(first + 1) % 3], tri[(first + 2) % 3]
+    cells = _split_quad(np.stack([a, b, c, c]), ku, kv).reshape(ku, kv, 4, 3)
+    cells[:, -1, 2:] = c  # the cells touching c are triangles (p, q, c, c), bit for bit
+    return cells.reshape(-1, 4, 3)
+
+
+def _quad_cuts(quad: np.ndarray, max_size: float | None) -> tuple[int, int]:
+    a, b, c, d = quad
+    ku = _cuts(max(float(np.linalg.norm(b - a)), float(np.linalg.norm(c - d))), max_size)
+    kv = _cuts(max(float(np.linalg.norm(d - a)), float(np.linalg.norm(c - b))), max_size)
+    return ku, kv
 
 
 def _split_quad(quad: np.ndarray, ku: int, kv: int) -> np.ndarray:
@@ -78,16 +114,31 @@ def _cuts(length: float, max_size: float | None) -> int:
     return max(1, math.ceil(length / max_size - 1e-9))
 
 
-def _pieces(poly: np.ndarray, size: float) -> tuple[list[np.ndarray], float]:
-    """Planar convex pieces (triangles or one quad) of a face, and its non-planarity."""
+def planar_parts(poly: np.ndarray, size: float) -> tuple[list[np.ndarray], float]:
+    """The face itself if it is planar, else its fan triangles; and its non-planarity (metres).
+
+    A face is planar when no vertex is farther than ``PLANAR_REL * size`` from the plane
+    through its centroid with its Newell normal. A non-planar face is split by a fan from its
+    first vertex (``v0 v1 v2``, ``v0 v2 v3``, ...): a documented, deterministic choice that
+    keeps every original edge (see ``docs/meshing.md``).
+    """
+    if len(poly) == 3:
+        return [poly], 0.0
     normal = _newell(poly)
     unit = normal / np.linalg.norm(normal)
     deviation = float(np.abs((poly - poly.mean(axis=0)) @ unit).max())
-    if len(poly) == 3:
-        return [poly], 0.0
     if deviation > _tol.PLANAR_REL * size:
-        # Non-planar: a documented, deterministic split, a fan from the first vertex.
         return [np.stack([poly[0], poly[i], poly[i + 1]]) for i in range(1, len(poly) - 1)], deviation
+    return [poly], 0.0
+
+
+def _pieces(poly: np.ndarray, size: float) -> tuple[list[np.ndarray], float]:
+    """Planar convex pieces (triangles or one quad) of a face, and its non-planarity."""
+    parts, deviation = planar_parts(poly, size)
+    if deviation or len(poly) == 3:
+        return parts, deviation
+    unit = _newell(poly)
+    unit = unit / np.linalg.norm(unit)
     if len(poly) == 4 and _is_convex(poly, unit):
         return [poly], 0.0
     return list(triangulate(poly)), 0.0
@@ -125,14 +176,9 @@ def subdivide_faces(vertices: np.ndarray, faces: list[np.ndarray], max_patch_siz
             report.nonplanar.append((index, deviation))
         for piece in pieces:
             if len(piece) == 4:
-                a, b, c, d = piece
-                ku = _cuts(max(np.linalg.norm(b - a), np.linalg.norm(c - d)), max_patch_size)
-                kv = _cuts(max(np.linalg.norm(d - a), np.linalg.norm(c - b)), max_patch_size)
-                cells = _split_quad(piece, ku, kv)
+                cells = _split_quad(piece, *_quad_cuts(piece, max_patch_size))
             else:
-                longest = max(np.linalg.norm(piece[1] - piece[0]), np.linalg.norm(piece[2] - piece[1]),
-                              np.linalg.norm(piece[0] - piece[2]))
-                cells = _split_triangle(piece, _cuts(longest, max_patch_size))
+                cells = _split_triangle(piece, max_patch_size)
             out.append(cells)
             owner.extend([index] * len(cells))
     quads = np.concatenate(out, axis=0) if out else np.zeros((0, 4, 3))

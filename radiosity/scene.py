@@ -14,6 +14,7 @@ from ._errors import RadiosityWarning, SceneError
 from ._validate import reject_unknown
 from .formfactors import polygon_normals
 from .io.obj import read_obj
+from .imprint import subdivide_imprinted
 from .patches import Patches, subdivide_faces
 from .quadrature import centroids_and_areas
 
@@ -21,7 +22,7 @@ __all__ = ["Scene", "load_scene", "bundled_scene"]
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 EMISSION_MODES = ("radiance", "exitance")
-LOAD_OPTIONS = ("units", "allow_clamp", "two_sided")
+LOAD_OPTIONS = ("units", "allow_clamp", "two_sided", "imprint")
 
 
 @dataclass(frozen=True, eq=False)
@@ -56,10 +57,15 @@ class Scene:
     notes: tuple[str, ...] = ()
     # View3D obstructions: patches that block light but exchange none (see io/view3d.py).
     patch_obstruction: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    # Patches covered by another object (floor under a block, ceiling behind a light; see
+    # imprint.py): they can neither receive nor send light. (n,) bool, all False by default.
+    patch_hidden: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
     def __post_init__(self):
         if len(self.patch_obstruction) != len(self.patch_quads):
             object.__setattr__(self, "patch_obstruction", np.zeros(len(self.patch_quads), bool))
+        if len(self.patch_hidden) != len(self.patch_quads):
+            object.__setattr__(self, "patch_hidden", np.zeros(len(self.patch_quads), bool))
 
     @property
     def n_patches(self) -> int:
@@ -122,7 +128,7 @@ class Scene:
         patches, _ = subdivide_faces(self.patch_quads.reshape(-1, 3), faces, max_patch_size)
         parent = patches.patch_face
         return replace(self, patch_quads=patches.quads, patch_object=self.patch_object[parent],
-                       patch_obstruction=self.patch_obstruction[parent],
+                       patch_obstruction=self.patch_obstruction[parent], patch_hidden=self.patch_hidden[parent],
                        patch_face=self.patch_face[parent], reflectance=self.reflectance[parent],
                        emission=self.emission[parent], max_patch_size=max_patch_size)
 
@@ -151,6 +157,10 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
         more than 50 m across (a millimetre file read as metres); give "m" to silence it.
     allow_clamp : bool, default: False
         Clamp reflectances >= 1 to 0.999 (with a warning) instead of refusing the scene.
+    imprint : bool, default: True
+        Cut faces along the outlines of other objects touching them (a block's footprint on
+        the floor, a light under the ceiling) and flag the covered regions in
+        ``Scene.patch_hidden``; see :mod:`radiosity.imprint` and ``docs/meshing.md``.
 
     Returns
     -------
@@ -181,7 +191,10 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
         raise ValueError(f"max_patch_size must be a positive number of metres, got {max_patch_size!r}")
     data = read_obj(path)
     vertices = data.vertices * UNITS[units or "m"]
-    patches, report = subdivide_faces(vertices, data.faces, max_patch_size)
+    if options.get("imprint", True):
+        patches, report, _ = subdivide_imprinted(vertices, data.faces, data.face_object, max_patch_size)
+    else:
+        patches, report = subdivide_faces(vertices, data.faces, max_patch_size)
     notes = list(data.warnings) + _units_notes(data, units) + _face_notes(data, report)
     if patches.n_patches == 0:
         for note in notes:
@@ -205,6 +218,7 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
         source=str(data.path),
         face_line=data.face_line,
         notes=tuple(notes),
+        patch_hidden=patches.patch_hidden,
     )
 
 

@@ -1,0 +1,482 @@
+"""Imprinting: cut faces along the outlines of the faces that touch them, and flag covered parts.
+
+Light changes abruptly where one object touches another: the floor is lit right up to a block's
+foot and dark under it; the ceiling is dark behind a light mounted just under it. A patch that
+straddles such an outline averages light and dark, and uniform refinement converges only at
+first order there. Imprinting cuts every receiving face along its contact outlines first, so
+later subdivision never crosses one, and flags the regions that can never exchange light as
+*hidden*.
+
+Two kinds of contact are found between faces of *different* objects (``CONTACT_REL``):
+
+- **overlap**: a face lies in (or within the tolerance of) the receiver's plane and overlaps it
+  in projection: a light just under a ceiling, a picture on a wall, a block's bottom face on
+  the floor. The receiver's overlapped region is hidden when the other face lies in front of it
+  (on its lit side). For exactly coplanar faces facing the same way the smaller face covers
+  the larger one (a picture covers the wall); facing opposite ways, both are covered.
+- **footprint**: edges of an object's faces lie in the receiver's plane and close into loops:
+  the bottom edges of a block without a bottom face standing on the floor. The polygon the
+  loops enclose is cut out; it is hidden when the object's faces in front of the receiver that
+  turn their back to it (a block's top) cover it in projection. An open tube standing on the
+  floor is cut but not hidden; open chains of edges (a single partition wall) are not cut.
+
+Pieces are built in each receiving face's plane with shapely (clipping) and mapbox_earcut
+(triangles of regions with holes), then pairs of triangles are merged into convex quads where
+the union is convex, removing the longest diagonals first.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .patches import FaceReport, Patches, _newell, planar_parts, subdivide_faces
+
+__all__ = ["Contact", "Imprinted", "imprint_faces", "subdivide_imprinted", "CONTACT_REL"]
+
+# Distance from a face's plane, relative to the scene's bounding-box diagonal, within which
+# another face or edge counts as touching it. 1e-3 of a 1 m scene is 1 mm: it catches a light
+# lowered 0.5 mm under a ceiling (the Cornell box) and modelling gaps of that order, and is far
+# below any gap that light can get through in a way a patch of 1/50 of the scene could resolve.
+CONTACT_REL = 1e-3
+
+# Signed distances below this fraction of the scene's diagonal count as exactly coplanar.
+COPLANAR_REL = 1e-9
+
+# Pieces smaller than this fraction of their face's area are round-off slivers and dropped.
+SLIVER_AREA_REL = 1e-9
+
+# A cut region covered in projection up to this fraction of its area counts as covered.
+COVER_AREA_REL = 1e-6
+
+# Contact outlines with more edges than this on one face are cut along the outlines only;
+# up to it, along the full lines through their edges (better-shaped pieces, O(lines^2) of them).
+MAX_EXTENSION_LINES = 24
+
+# A merged quad is kept only if each corner turns by at least this much (sine of the angle,
+# times both edge lengths): avoids quads that are triangles with a flat corner.
+CONVEX_TURN_REL = 1e-6
+
+
+@dataclass(frozen=True)
+class Contact:
+    """One contact region imprinted on a face."""
+
+    face: int  # receiving face (index into the input faces)
+    other_object: int  # object touching it
+    kind: str  # "overlap" or "footprint"
+    hidden: bool  # the region can neither receive nor send light
+    outline: np.ndarray  # (k, 3) exterior ring of the region on the face, metres
+    area: float  # region area on the face, m^2
+
+
+@dataclass(frozen=True)
+class Imprinted:
+    """Faces cut along their contacts: planar pieces, each with its face and hidden flag.
+
+    ``vertices[pieces[i]]`` is piece ``i``; faces without contacts are passed through whole
+    (same vertices, same order), so subdivision treats them exactly as before.
+    """
+
+    vertices: np.ndarray  # (v, 3) float
+    pieces: list[np.ndarray]  # vertex indices of each piece, counter-clockwise from the front
+    piece_face: np.ndarray  # (m,) int, source face of each piece
+    piece_hidden: np.ndarray  # (m,) bool
+    contacts: list[Contact] = field(default_factory=list)
+    nonplanar: list[tuple[int, float]] = field(default_factory=list)  # imprinted non-planar faces
+
+
+@dataclass
+class _Part:
+    """A planar part of a face (the face itself, or a triangle of a non-planar face)."""
+
+    face: int
+    obj: int
+    poly: np.ndarray  # (k, 3)
+    normal: np.ndarray  # (3,) unit
+    origin: np.ndarray  # (3,)
+    u: np.ndarray  # (3,) in-plane axes; (u, v, normal) is right handed
+    v: np.ndarray
+    area: float
+
+    def to_2d(self, points: np.ndarray) -> np.ndarray:
+        rel = points - self.origin
+        return np.column_stack([rel @ self.u, rel @ self.v])
+
+    def to_3d(self, xy: np.ndarray) -> np.ndarray:
+        return self.origin + xy[:, :1] * self.u + xy[:, 1:2] * self.v
+
+
+def _make_parts(vertices: np.ndarray, faces: list[np.ndarray], face_object: np.ndarray
+                ) -> tuple[list[_Part], list[float]]:
+    parts: list[_Part] = []
+    deviations: list[float] = []
+    for index, face in enumerate(faces):
+        poly = vertices[face]
+        size = float(np.ptp(poly, axis=0).max()) if len(poly) else 0.0
+        newell = _newell(poly)
+        area = float(np.linalg.norm(newell))
+        deviations.append(0.0)
+        if not area > 1e-12 * size**2:
+            continue  # degenerate: subdivision reports it
+        pieces, deviation = planar_parts(poly, size)
+        deviations[-1] = deviation
+        for piece in pieces:
+            normal = _newell(piece)
+            area = float(np.linalg.norm(normal))
+            if not area > 1e-12 * size**2:
+                continue
+            normal = normal / area
+            u = piece[1] - piece[0]
+            u = u - (u @ normal) * normal
+            u = u / np.linalg.norm(u)
+            parts.append(_Part(index, int(face_object[index]), piece, normal, piece[0].copy(), u,
+                               np.cross(normal, u), area))
+    return parts, deviations
+
+
+def _polygon(xy: np.ndarray):
+    import shapely
+
+    poly = shapely.Polygon(xy)
+    if not poly.is_valid:
+        poly = shapely.make_valid(poly)
+    return poly
+
+
+def _polygons(geometry) -> list:
+    """The polygons of any shapely geometry (collections and lines are flattened or dropped)."""
+    import shapely
+
+    out = []
+    for part in shapely.get_parts(geometry):
+        if isinstance(part, shapely.Polygon):
+            out.append(part)
+        elif isinstance(part, (shapely.MultiPolygon, shapely.GeometryCollection)):
+            out.extend(_polygons(part))
+    return out
+
+
+def _snap(points: np.ndarray, tol: float) -> np.ndarray:
+    """Merge 2-D points closer than ``tol`` to the first of their cluster (few points)."""
+    out = points.copy()
+    for i in range(len(out)):
+        close = np.linalg.norm(out[:i] - out[i], axis=1) <= tol
+        if close.any():
+            out[i] = out[:i][close][0]
+    return out
+
+
+def _footprint(segments: list[np.ndarray], tol: float):
+    """Union of the polygons that 2-D segments (s, 2, 2) close into, or None."""
+    import shapely
+    from shapely.ops import polygonize
+
+    ends = _snap(np.concatenate(segments).reshape(-1, 2), tol).reshape(-1, 2, 2)
+    lines = [shapely.LineString(s) for s in ends if np.linalg.norm(s[1] - s[0]) > tol]
+    if len(lines) < 3:
+        return None
+    polys = list(polygonize(shapely.unary_union(lines)))
+    if not polys:
+        return None
+    return shapely.unary_union(polys)
+
+
+def _regions_of(receiver: _Part, parts: list[_Part], part_points: np.ndarray, part_of_point: np.ndarray,
+                scale: float) -> list[tuple[object, bool, str, int]]:
+    """Contact regions (shapely geometry in the receiver's frame, hidden, kind, object)."""
+    import shapely
+
+    tol = CONTACT_REL * scale
+    exact = COPLANAR_REL * scale
+    dist = (part_points - receiver.origin) @ receiver.normal
+    lo = np.full(len(parts), np.inf)
+    hi = np.full(len(parts), -np.inf)
+    np.minimum.at(lo, part_of_point, dist)
+    np.maximum.at(hi, part_of_point, dist)
+    near = np.zeros(len(parts), bool)
+    np.logical_or.at(near, part_of_point, np.abs(dist) <= tol)
+    box_lo, box_hi = receiver.poly.min(axis=0) - tol, receiver.poly.max(axis=0) + tol
+    shape = _polygon(receiver.to_2d(receiver.poly))
+    regions = []
+    segments: dict[int, list[np.ndarray]] = defaultdict(list)
+    for index in np.flatnonzero(near):
+        other = parts[index]
+        if other.obj == receiver.obj:
+            continue
+        if lo[index] >= -tol and hi[index] <= tol:  # lies in the receiver's plane: overlap
+            if (other.poly.max(axis=0) < box_lo).any() or (other.poly.min(axis=0) > box_hi).any():
+                continue
+            region = shape.intersection(_polygon(receiver.to_2d(other.poly)))
+            if region.area <= SLIVER_AREA_REL * shape.area:
+                continue
+            height = 0.5 * (lo[index] + hi[index])
+            if height < -exact:
+                continue  # behind the receiver: its lit side is untouched
+            facing = float(other.normal @ receiver.normal)
+            if height > exact or facing < 0:
+                hidden = True
+            else:  # exactly coplanar, facing the same way: the smaller face lies on top
+                hidden = (other.area, other.face) < (receiver.area, receiver.face)
+            regions.append((region, hidden, "overlap", other.obj))
+            continue
+        d = dist[part_of_point == index]
+        on = np.abs(d) <= tol
+        both = on & np.roll(on, -1)
+        if both.any():
+            xy = receiver.to_2d(other.poly)
+            starts = np.flatnonzero(both)
+            segments[other.obj].extend(np.stack([xy[starts], xy[(starts + 1) % len(xy)]], axis=1))
+    for obj, segs in segments.items():
+        foot = _footprint(segs, tol)
+        if foot is None:
+            continue
+        region = shape.intersection(foot)
+        if region.area <= SLIVER_AREA_REL * shape.area:
+            continue
+        regions.append((region, _is_covered(region, receiver, parts, obj, tol), "footprint", obj))
+    return regions
+
+
+def _is_covered(region, receiver: _Part, parts: list[_Part], obj: int, tol: float) -> bool:
+    """Whether ``obj``'s faces in front of the receiver, backs towards it, cover ``region``."""
+    import shapely
+
+    covers = []
+    for part in parts:
+        if part.obj != obj or float(part.normal @ receiver.normal) <= 1e-9:
+            continue
+        if ((part.poly - receiver.origin) @ receiver.normal).min() < -tol:
+            continue
+        covers.append(_polygon(receiver.to_2d(part.poly)))
+    if not covers:
+        return False
+    left = region.difference(shapely.unary_union(covers))
+    return left.area <= COVER_AREA_REL * region.area
+
+
+def _turns_ok(poly: np.ndarray) -> bool:
+    edges = np.roll(poly, -1, axis=0) - poly
+    nxt = np.roll(edges, -1, axis=0)
+    cross = edges[:, 0] * nxt[:, 1] - edges[:, 1] * nxt[:, 0]
+    lengths = np.linalg.norm(edges, axis=1) * np.linalg.norm(nxt, axis=1)
+    return bool((cross > CONVEX_TURN_REL * lengths).all())
+
+
+def convex_pieces(polygon) -> list[np.ndarray]:
+    """Convex pieces (triangles and quads, counter-clockwise, (k, 2)) of a shapely polygon.
+
+    A convex polygon of at most four corners is kept whole; anything else (more corners,
+    non-convex, holes) is triangulated with earcut, and then neighbouring triangles are merged
+    into convex quads, longest shared edge first (that removes the sliver-making diagonals).
+    """
+    import mapbox_earcut
+    import shapely
+    from shapely.geometry.polygon import orient
+
+    polygon = orient(shapely.simplify(polygon, 0.0), 1.0)
+    if polygon.is_empty or polygon.area <= 0:
+        return []
+    exterior = np.asarray(polygon.exterior.coords)[:-1]
+    if not polygon.interiors and len(exterior) <= 4 and _turns_ok(exterior):
+        return [exterior]
+    rings = [exterior] + [np.asarray(r.coords)[:-1] for r in polygon.interiors]
+    points = np.concatenate(rings)
+    ends = np.cumsum([len(r) for r in rings]).astype(np.uint32)
+    tris = np.asarray(mapbox_earcut.triangulate_float64(points, ends), dtype=np.int64).reshape(-1, 3)
+    a, b, c = points[tris[:, 0]], points[tris[:, 1]], points[tris[:, 2]]
+    signed = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    tris = np.where((signed < 0)[:, None], tris[:, ::-1], tris)[signed != 0]
+    owner: dict[tuple[int, int], int] = {}
+    for t, tri in enumerate(tris):
+        for k in range(3):
+            owner[(int(tri[k]), int(tri[(k + 1) % 3]))] = t
+    shared = []
+    for (i, j), t in owner.items():
+        s = owner.get((j, i))
+        if s is not None and t < s:
+            shared.append((float(np.linalg.norm(points[i] - points[j])), i, j, t, s))
+    shared.sort(reverse=True)
+    used = np.zeros(len(tris), bool)
+    out = []
+    for _, i, j, t, s in shared:
+        if used[t] or used[s]:
+            continue
+        c_t = next(int(x) for x in tris[t] if x not in (i, j))
+        c_s = next(int(x) for x in tris[s] if x not in (i, j))
+        quad = points[[i, c_s, j, c_t]]  # t holds i -> j, s holds j -> i
+        if _turns_ok(quad):
+            used[t] = used[s] = True
+            out.append(quad)
+    out.extend(points[tri] for tri, u in zip(tris, used) if not u)
+    return out
+
+
+def imprint_faces(vertices: np.ndarray, faces: list[np.ndarray], face_object: np.ndarray, *,
+                  scale: float | None = None) -> Imprinted:
+    """Cut faces along the outlines of other objects' faces that touch them.
+
+    Parameters
+    ----------
+    vertices : (v, 3) float
+        Metres.
+    faces : list of (k,) int
+        Vertex indices of each face, counter-clockwise seen from the front.
+    face_object : (f,) int
+        Object of each face; only faces of different objects imprint each other.
+    scale : float, optional
+        Length the contact tolerance is relative to (``CONTACT_REL``); default: the diagonal of
+        the vertices' bounding box.
+
+    Returns
+    -------
+    Imprinted
+        Planar pieces with their face and hidden flag; faces without contacts pass whole.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> floor = np.array([[0, 0, 0], [2, 0, 0], [2, 2, 0], [0, 2, 0]], float)
+    >>> lid = np.array([[0.5, 0.5, 0], [1.5, 0.5, 0], [1.5, 1.5, 0], [0.5, 1.5, 0]], float)
+    >>> cut = imprint_faces(np.concatenate([floor, lid]), [np.arange(4), np.arange(4, 8)], np.array([0, 1]))
+    >>> int(cut.piece_hidden.sum()), [c.kind for c in cut.contacts]
+    (1, ['overlap'])
+    """
+    vertices = np.asarray(vertices, dtype=float)
+    face_object = np.asarray(face_object)
+    if scale is None:
+        used = vertices[np.unique(np.concatenate(faces))] if faces else vertices
+        scale = float(np.linalg.norm(np.ptp(used, axis=0))) if len(used) else 1.0
+    parts, deviations = _make_parts(vertices, faces, face_object)
+    if parts:
+        part_points = np.concatenate([p.poly for p in parts])
+        part_of_point = np.repeat(np.arange(len(parts)), [len(p.poly) for p in parts])
+    by_face: dict[int, list[tuple[_Part, list]]] = defaultdict(list)
+    contacts: list[Contact] = []
+    for part in parts:
+        regions = _regions_of(part, parts, part_points, part_of_point, scale)
+        by_face[part.face].append((part, regions))
+        for region, hidden, kind, obj in regions:
+            for poly in _polygons(region):
+                ring = np.asarray(poly.exterior.coords)[:-1]
+                contacts.append(Contact(part.face, obj, kind, hidden, part.to_3d(ring), float(poly.area)))
+
+    out_vertices: list[np.ndarray] = []
+    pieces: list[np.ndarray] = []
+    piece_face: list[int] = []
+    piece_hidden: list[bool] = []
+    nonplanar: list[tuple[int, float]] = []
+    n_points = 0
+
+    def emit(poly3: np.ndarray, face: int, hidden: bool) -> None:
+        nonlocal n_points
+        out_vertices.append(poly3)
+        pieces.append(np.arange(n_points, n_points + len(poly3)))
+        n_points += len(poly3)
+        piece_face.append(face)
+        piece_hidden.append(hidden)
+
+    for index, face in enumerate(faces):
+        entries = by_face.get(index, [])
+        if not any(regions for _, regions in entries):
+            emit(vertices[face], index, False)
+            continue
+        if deviations[index]:
+            nonplanar.append((index, deviations[index]))
+        for part, regions in entries:
+            _emit_part(part, regions, emit, CONTACT_REL * scale)
+    verts = np.concatenate(out_vertices) if out_vertices else np.zeros((0, 3))
+    return Imprinted(verts, pieces, np.asarray(piece_face, np.int64), np.asarray(piece_hidden, bool),
+                     contacts, nonplanar)
+
+
+def _extension_lines(regions, shape, tol: float) -> list:
+    """Lines through every edge of the contact regions, clipped to the receiving shape."""
+    import shapely
+
+    seen: list[tuple[float, float, float]] = []
+    lines = []
+    x0, y0, x1, y1 = shape.bounds
+    reach = 2.0 * float(np.hypot(x1 - x0, y1 - y0))
+    for region in regions:
+        for poly in _polygons(region):
+            for ring in [poly.exterior, *poly.interiors]:
+                xy = np.asarray(ring.coords)
+                for p, q in zip(xy[:-1], xy[1:]):
+                    d = q - p
+                    length = float(np.hypot(*d))
+                    if length <= tol:
+                        continue
+                    d = d / length
+                    normal = np.array([-d[1], d[0]])
+                    offset = float(normal @ p)
+                    if normal[0] < -1e-12 or (abs(normal[0]) <= 1e-12 and normal[1] < 0):
+                        normal, offset = -normal, -offset
+                    key = (float(normal[0]), float(normal[1]), offset)
+                    if any(abs(key[0] - k[0]) + abs(key[1] - k[1]) < 1e-9 and abs(key[2] - k[2]) <= tol
+                           for k in seen):
+                        continue
+                    seen.append(key)
+                    line = shapely.LineString([p - reach * d, q + reach * d]).intersection(shape)
+                    if not line.is_empty:
+                        lines.append(line)
+    return lines
+
+
+def _emit_part(part: _Part, regions, emit, tol: float) -> None:
+    import shapely
+    from shapely.ops import polygonize
+
+    shape = _polygon(part.to_2d(part.poly))
+    minimum = SLIVER_AREA_REL * shape.area
+    clipped = [(region.intersection(shape), hidden) for region, hidden, _, _ in regions]
+    clipped = [(r, h) for r, h in clipped if not r.is_empty and r.area > minimum]
+    hidden_union = shapely.unary_union([r for r, h in clipped if h]) if any(h for _, h in clipped) else None
+    if len(clipped) == 1 and abs(clipped[0][0].area - shape.area) <= minimum:
+        emit(part.poly, part.face, clipped[0][1])  # the contact covers the whole part: no cut
+        return
+    if not clipped:
+        emit(part.poly, part.face, False)
+        return
+    # Cut along the full lines through the contact edges: in a convex face every cell of that
+    # arrangement is convex and lies on one side of every outline, and most cells are
+    # parallelograms or trapezoids, which subdivide into well-shaped patches.
+    lines = _extension_lines([r for r, _ in clipped], shape, tol)
+    if len(lines) <= MAX_EXTENSION_LINES:
+        cells = [c for c in polygonize(shapely.unary_union([shape.exterior, *lines]))
+                 if c.area > minimum and shape.contains(c.representative_point())]
+    else:  # too many outlines: cut along the outlines only
+        cells = []
+        taken = shapely.Polygon()
+        for region, _ in clipped:
+            cells.extend(_polygons(region.difference(taken)))
+            taken = taken.union(region)
+        cells.extend(_polygons(shape.difference(taken)))
+    if hidden_union is not None:  # hidden regions stay whole: their patches never enter the solve
+        cells = [c for c in cells if not hidden_union.contains(c.representative_point())]
+        for poly in _polygons(hidden_union):
+            for xy in convex_pieces(poly):
+                emit(part.to_3d(xy), part.face, True)
+    for cell in cells:
+        for xy in convex_pieces(cell):
+            emit(part.to_3d(xy), part.face, False)
+
+
+def subdivide_imprinted(vertices: np.ndarray, faces: list[np.ndarray], face_object: np.ndarray,
+                        max_patch_size: float | None, *, scale: float | None = None
+                        ) -> tuple[Patches, FaceReport, Imprinted]:
+    """Imprint contacts (:func:`imprint_faces`), then subdivide the pieces.
+
+    Returns patches whose ``patch_face`` are the input faces and whose ``patch_hidden`` follow
+    the pieces, the face report in input-face indices, and the imprint itself.
+    """
+    cut = imprint_faces(vertices, faces, face_object, scale=scale)
+    patches, report = subdivide_faces(cut.vertices, cut.pieces, max_patch_size)
+    piece = patches.patch_face
+    nonplanar = sorted({(int(cut.piece_face[i]), d) for i, d in report.nonplanar} | set(cut.nonplanar))
+    present = set(cut.piece_face[piece].tolist())
+    degenerate = sorted({int(cut.piece_face[i]) for i in report.degenerate} - present)
+    face_report = FaceReport(degenerate, nonplanar)
+    return (Patches(patches.quads, cut.piece_face[piece], cut.piece_hidden[piece]), face_report, cut)
