@@ -114,7 +114,7 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     options = Options.from_preset(preset, **overrides)
     prepared = prepare(scene, options)
     cut = prepared.scene
-    F = _without(prepared.F, cut.patch_obstruction)
+    F = _without(prepared.F, _inactive(cut))
     t0 = time.perf_counter()
     radiosity, report = solve_system(F, cut.reflectance, cut.emission, cut.patch_area,
                                      method=options.solver, rtol=options.rtol)
@@ -123,6 +123,15 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     balance = energy_balance(F, cut.patch_area, cut.reflectance, cut.emission, radiosity)
     return Solution(scene=cut, radiosity=radiosity, F=F, options=options, timings=timings,
                     fill=prepared.stats, solver=report, energy=balance, cache_hit=prepared.cache_hit)
+
+
+def _inactive(scene: Scene) -> np.ndarray:
+    """Patches left out of the system: obstructions, and hidden regions (under a block, behind
+    a light) that can neither receive nor send light; their radiosity is their own emission."""
+    hidden = getattr(scene, "patch_hidden", None)
+    if hidden is None or len(hidden) != scene.n_patches:
+        return scene.patch_obstruction
+    return scene.patch_obstruction | hidden
 
 
 def _without(F: sp.csr_matrix, inactive: np.ndarray) -> sp.csr_matrix:
@@ -169,7 +178,7 @@ def view_factors(scene: Scene, *, preset: str = "default", enforce: str = "none"
     if options.max_patch_size is None:
         options = Options.from_preset(preset, **{**overrides, "patch_size_rel": np.inf})
     prepared = prepare(scene, options)
-    F = _without(prepared.F, prepared.scene.patch_obstruction)
+    F = _without(prepared.F, _inactive(prepared.scene))
     if enforce != "none":
         F = enforce_reciprocity(F, prepared.scene.patch_area, closure=enforce == "closure")
     return F
