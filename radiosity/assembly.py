@@ -21,19 +21,58 @@ from .quadrature import patch_points
 __all__ = ["FillSettings", "FillStats", "candidate_pairs", "unoccluded_factors", "assemble"]
 
 
+VISIBILITY_MODES = ("auto", "rays", "exact")
+
+
 @dataclass(frozen=True)
 class FillSettings:
-    """Accuracy knobs of the fill (part of the cache key)."""
+    """Accuracy knobs of the fill (part of the cache key).
 
-    near_order: int = 3  # Gauss points per direction on the receiver for near pairs
-    far_separation: float = 3.0  # relative separation beyond which one centroid point is used
-    visibility_samples: int = 2  # points per direction on each patch for shadow rays
+    Attributes
+    ----------
+    near_order : int, default: 3
+        Gauss points per direction on the receiver for near pairs.
+    far_separation : float, default: 3.0
+        Relative separation beyond which one centroid point is used.
+    visibility_samples : int, default: 2
+        Points per direction on each patch for the first round of shadow rays
+        (``visibility_samples**4`` rays per partly occluded pair).
+    visibility : {"auto", "rays", "exact"}, default: "auto"
+        How partly occluded pairs are computed: adaptive stratified rays, exact shadow clipping
+        at the receiver's quadrature points, or per pair by ``visibility_rtol``.
+    visibility_max_samples : int, default: 4
+        Points per direction on each patch for pairs whose first-round rays disagree.
+    visibility_rtol : float, default: 1e-4
+        ``"auto"`` computes a partly occluded pair exactly when rays would likely miss it by
+        more than this: when ``F_unoccluded / visibility_max_samples > visibility_rtol``. It is
+        an absolute error per view factor, i.e. relative to a closed enclosure's row sum of 1.
+    """
+
+    near_order: int = 3
+    far_separation: float = 3.0
+    visibility_samples: int = 2
+    visibility: str = "auto"
+    visibility_max_samples: int = 4
+    visibility_rtol: float = 1e-4
+
+    def __post_init__(self):
+        if self.visibility not in VISIBILITY_MODES:
+            msg = f"visibility must be one of {', '.join(VISIBILITY_MODES)}; got {self.visibility!r}"
+            raise ValueError(msg)
+        if self.visibility_samples < 1 or self.visibility_max_samples < 1:
+            msg = (f"visibility_samples and visibility_max_samples must be >= 1, got "
+                   f"{self.visibility_samples} and {self.visibility_max_samples}")
+            raise ValueError(msg)
+        if not self.visibility_rtol >= 0:
+            raise ValueError(f"visibility_rtol must be >= 0, got {self.visibility_rtol}")
 
 
 @dataclass
 class FillStats:
     n_pairs: int = 0
-    n_traced_pairs: int = 0
+    n_traced_pairs: int = 0  # partly occluded pairs (rays or exact shadows)
+    n_blocked_pairs: int = 0  # pairs fully blocked, decided without rays
+    n_exact_pairs: int = 0  # partly occluded pairs computed by exact shadows
     n_rays: int = 0
     dropped_mass: float = 0.0
     seconds_formfactors: float = 0.0
@@ -61,12 +100,17 @@ def candidate_pairs(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray
     return rows[r], j
 
 
+def _is_near(quads, centroid, i, j, settings: FillSettings) -> np.ndarray:
+    """Pairs integrated at Gauss points of the receiver (the others use its centroid)."""
+    radius = _circumradius(quads, centroid)
+    separation = np.linalg.norm(centroid[i] - centroid[j], axis=1) / (radius[i] + radius[j])
+    return separation < settings.far_separation
+
+
 def unoccluded_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, area: np.ndarray,
                        i: np.ndarray, j: np.ndarray, settings: FillSettings) -> np.ndarray:
     """F(i -> j) without occlusion, by Gauss quadrature over i of Lambert's formula to j."""
-    radius = _circumradius(quads, centroid)
-    separation = np.linalg.norm(centroid[i] - centroid[j], axis=1) / (radius[i] + radius[j])
-    near = separation < settings.far_separation
+    near = _is_near(quads, centroid, i, j, settings)
     out = np.empty(len(i))
     far = ~near
     out[far] = lambert_pairs(centroid[i[far]], normals[i[far]], quads[j[far]])
@@ -80,12 +124,55 @@ def unoccluded_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndar
     return out
 
 
+def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettings, stats: FillStats) -> None:
+    """Multiply the unoccluded factors f (in place) by each pair's visible fraction."""
+    from .visibility import FULL, MAYBE
+
+    nz = np.flatnonzero(f > 0)
+    status, rows, occ = visibility.classify(i[nz], j[nz])
+    blocked = nz[status == FULL]
+    f[blocked] = 0.0
+    stats.n_blocked_pairs += len(blocked)
+    part = np.flatnonzero(status == MAYBE)
+    if not len(part):
+        return
+    stats.n_traced_pairs += len(part)
+    if settings.visibility == "exact":
+        exact = np.ones(len(part), bool)
+    elif settings.visibility == "rays":
+        exact = np.zeros(len(part), bool)
+    else:
+        exact = f[nz[part]] / settings.visibility_max_samples > settings.visibility_rtol
+    pi, pj = i[nz[part]], j[nz[part]]
+    frac = np.ones(len(part))
+    if (~exact).any():
+        sel = np.flatnonzero(~exact)
+        frac[sel] = visibility.ray_fraction(pi[sel], pj[sel], settings.visibility_samples,
+                                            settings.visibility_max_samples)
+    if exact.any():
+        stats.n_exact_pairs += int(exact.sum())
+        # the same receiver points as the unoccluded factor, so F = sum_q w_q F_visible(x_q)
+        near = _is_near(quads, centroid, pi, pj, settings)
+        local = np.full(len(nz), -1)
+        local[part] = np.arange(len(part))
+        for mask, order in ((exact & near, settings.near_order), (exact & ~near, 1)):
+            if not mask.any():
+                continue
+            sel = np.flatnonzero(mask)
+            where = np.full(len(part), -1)
+            where[sel] = np.arange(len(sel))
+            keep = where[local[rows]] >= 0
+            frac[sel] = visibility.exact_fraction(pi[sel], pj[sel], where[local[rows[keep]]], occ[keep], order)
+    f[nz[part]] *= frac
+
+
 def assemble(quads, normals, centroid, area, visibility, settings: FillSettings, progress=None
              ) -> tuple[sp.csr_matrix, FillStats]:
     """The sparse view-factor matrix F (n, n) with occlusion, and fill statistics."""
     n = len(quads)
     stats = FillStats()
     rows_per_block = max(1, min(n, 2_000_000 // max(n, 1)))
+    rays_before = visibility.n_rays if visibility is not None else 0
     parts_i, parts_j, parts_v = [], [], []
     for start in range(0, n, rows_per_block):
         rows = np.arange(start, min(n, start + rows_per_block))
@@ -96,10 +183,7 @@ def assemble(quads, normals, centroid, area, visibility, settings: FillSettings,
             t1 = time.perf_counter()
             stats.seconds_formfactors += t1 - t0
             if visibility is not None:
-                nonzero = f > 0
-                traced = visibility.needs_rays(i[nonzero], j[nonzero])
-                stats.n_traced_pairs += int(traced.sum())
-                f[nonzero] *= visibility.fraction(i[nonzero], j[nonzero])
+                _apply_visibility(f, quads, centroid, i, j, visibility, settings, stats)
                 stats.seconds_visibility += time.perf_counter() - t1
             keep = f > _tol.DROP_FACTOR
             stats.dropped_mass += float((f[~keep] * area[i[~keep]]).sum())
@@ -110,7 +194,7 @@ def assemble(quads, normals, centroid, area, visibility, settings: FillSettings,
         if progress is not None:
             progress(len(rows))
     if visibility is not None:
-        stats.n_rays = visibility.n_rays
+        stats.n_rays = visibility.n_rays - rays_before
     if parts_i:
         i, j, v = (np.concatenate(p) for p in (parts_i, parts_j, parts_v))
     else:

@@ -1,0 +1,31 @@
+"""Named tolerances of the visibility stage (kept beside it; candidates for ``radiosity._tol``)."""
+
+from __future__ import annotations
+
+# Rays stop this fraction of their length short of the end point (tfar = 1 - this), on top of
+# the end's offset off the source surface (``_tol.RAY_OFFSET_REL``).
+RAY_TFAR_SHORT = 1e-4
+
+# Distance from an occluder's plane, relative to the scene size, within which a patch vertex
+# counts as lying in that plane (touching or coplanar). float64 geometry, so far above rounding.
+PLANE_REL = 1e-9
+
+# Coplanar occluder patches of one object are merged into one convex polygon when the area of
+# their convex hull matches the sum of their areas to this relative accuracy.
+MERGE_AREA_REL = 1e-9
+
+# Merged occluder polygons keep at most this many vertices (more: the patches stay separate).
+MAX_OCCLUDER_VERTICES = 8
+
+# Occluders per node leaf of the bounding-volume hierarchy used to find a pair's occluders.
+BVH_LEAF = 4
+
+# Candidate (pair, occluder) rows examined per chunk (bounds temporary memory, ~0.5 GB).
+CHUNK_TRIPLES = 400_000
+
+# Exact-shadow rows (receiver point, source, occluder) per numpy chunk.
+CHUNK_SHADOWS = 100_000
+
+# Kernel weights below this fraction of a pair's largest weight count as zero when deciding
+# whether a pair's rays agree (a sample on the receiver's horizon carries no light).
+WEIGHT_FLOOR_REL = 1e-12

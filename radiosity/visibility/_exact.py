@@ -1,0 +1,200 @@
+"""Exact shadows: the part of a source polygon that occluders hide from a receiver point.
+
+For a receiver point x, a source patch S (convex) and a convex occluder polygon K, the hidden
+part of S is S clipped by the cone from x over K', where K' is K clipped to the slab between
+S's plane and the parallel plane through x (only that part of K lies between x and S). The
+cone is the intersection of the half-spaces bounded by the planes through x and each edge of
+K', so the clip is a sequence of Sutherland-Hodgman steps on convex polygons, all in 3-D: no
+projection to infinity, no image plane to bound (seed 002 §2 clips in the image plane; clipping
+by the cone's planes is the same operation without the division). The hidden part's form factor
+is Lambert's closed form of that convex polygon (which also clips it to x's horizon), and the
+visible form factor is ``F(x -> S) - F(x -> hidden)`` by additivity.
+
+When several occluders hide parts of S from one point, their hidden polygons may overlap:
+those few rows are united in S's plane with shapely, and the union's form factor is the sum
+over its rings (exterior rings add, holes subtract).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..formfactors import lambert_pairs
+from ._constants import CHUNK_SHADOWS
+
+__all__ = ["clip_convex", "hidden_polygons", "union_factors"]
+
+
+def clip_convex(poly: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """Clip convex polygons (r, k, 3) to ``h >= 0`` (values at the vertices, (r, k)).
+
+    Returns (r, k + 1, 3): the clipped polygon, padded by repeating its first vertex (which adds
+    zero-length edges only). An empty result repeats one point, so it has zero area.
+    """
+    r, k, _ = poly.shape
+    scale = np.abs(h).max(axis=1, keepdims=True)
+    h = np.where(np.abs(h) <= 1e-13 * scale, 0.0, h)  # vertices on the line: no spurious crossings
+    nxt = np.roll(poly, -1, axis=1)
+    h_next = np.roll(h, -1, axis=1)
+    keep = h >= 0.0
+    crosses = ((h > 0.0) & (h_next < 0.0)) | ((h < 0.0) & (h_next > 0.0))
+    t = np.where(crosses, h / np.where(crosses, h - h_next, 1.0), 0.0)
+    cut = poly + t[..., None] * (nxt - poly)
+    slots = np.stack([poly, cut], axis=2).reshape(r, 2 * k, 3)
+    valid = np.stack([keep, crosses], axis=2).reshape(r, 2 * k)
+    order = np.argsort(~valid, axis=1, kind="stable")[:, :k + 1]
+    out = np.take_along_axis(slots, order[..., None], axis=1)
+    count = valid.sum(axis=1)
+    pad = np.arange(k + 1)[None, :] >= count[:, None]
+    first = np.where(count[:, None] > 0, out[:, 0], poly[:, 0])
+    return np.where(pad[..., None], first[:, None, :], out)
+
+
+def hidden_polygons(x: np.ndarray, source: np.ndarray, source_normal: np.ndarray,
+                    occluder: np.ndarray, occluder_normal: np.ndarray, tol: float) -> np.ndarray:
+    """Part of each source hidden from x by one convex occluder, as a padded polygon.
+
+    Parameters
+    ----------
+    x : (r, 3) float
+        Receiver points.
+    source : (r, 4, 3) float
+        Convex source patches (triangles repeat a vertex).
+    source_normal, occluder_normal : (r, 3) float
+        Unit normals.
+    occluder : (r, m, 3) float
+        Convex occluder polygons (padded by repeated vertices).
+    tol : float
+        Length below which a distance counts as zero (metres).
+
+    Returns
+    -------
+    (r, 4 + m + 2, 3) float
+        Hidden polygons in the source's plane; rows with nothing hidden have zero area.
+    """
+    r, m, _ = occluder.shape
+    centre = source.mean(axis=1)
+    side = np.einsum("rc,rc->r", x - centre, source_normal)
+    flip = np.where(side < 0, -1.0, 1.0)
+    nrm = source_normal * flip[:, None]
+    dx = np.abs(side)
+    # heights of the occluder's vertices above the source plane, towards x
+    height = np.einsum("rmc,rc->rm", occluder - centre[:, None, :], nrm)
+    k1 = clip_convex(occluder, height)
+    h1 = np.einsum("rmc,rc->rm", k1 - centre[:, None, :], nrm)
+    k2 = clip_convex(k1, dx[:, None] - h1)
+    # the cone from x over k2: one half-space per edge, oriented towards k2's vertex mean
+    rel = k2 - x[:, None, :]
+    planes = np.cross(rel, np.roll(rel, -1, axis=1))
+    inner = k2.mean(axis=1) - x
+    orient = np.einsum("rmc,rc->rm", planes, inner)
+    planes *= np.where(orient < 0, -1.0, 1.0)[..., None]
+    # a degenerate cone (x in the occluder's plane, or nothing left of it) hides nothing
+    apex = np.abs(np.einsum("rc,rc->r", x - occluder.mean(axis=1), occluder_normal))
+    centred = k2 - k2.mean(axis=1, keepdims=True)
+    area2 = np.linalg.norm(np.cross(centred, np.roll(centred, -1, axis=1)).sum(axis=1), axis=1)
+    size = np.linalg.norm(occluder - occluder.mean(axis=1, keepdims=True), axis=2).max(axis=1)
+    empty = (apex <= tol) | (area2 <= (tol * tol)) | (dx <= tol) | (size <= tol)
+    poly = source
+    for e in range(planes.shape[1]):
+        h = np.einsum("rkc,rc->rk", poly - x[:, None, :], planes[:, e])
+        # an edge of zero length has a zero plane: it keeps everything
+        poly = clip_convex(poly, h)
+    poly[empty] = poly[empty, :1]
+    return poly
+
+
+def union_factors(x: np.ndarray, nx: np.ndarray, group: np.ndarray, polys: np.ndarray,
+                  source_normal: np.ndarray) -> np.ndarray:
+    """Form factor from x to the union of the polygons that share a group (all in one plane).
+
+    Parameters
+    ----------
+    x, nx : (r, 3) float
+        Receiver point and normal of each row (equal within a group).
+    group : (r,) int
+        Rows with the same group are united; groups are numbered 0..g-1.
+    polys : (r, k, 3) float
+        Convex polygons in the plane of the group's source.
+    source_normal : (r, 3) float
+
+    Returns
+    -------
+    (g,) float
+    """
+    import shapely
+
+    n_groups = int(group.max()) + 1 if len(group) else 0
+    out = np.zeros(n_groups)
+    if n_groups == 0:
+        return out
+    first = np.unique(group, return_index=True)[1]
+    origin = polys.mean(axis=1)[first][group]
+    normal = source_normal[first][group]
+    helper = np.where(np.abs(normal[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+    u = np.cross(normal, helper)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    w = np.cross(normal, u)
+    rel = polys - origin[:, None, :]
+    flat = np.stack([np.einsum("rkc,rc->rk", rel, u), np.einsum("rkc,rc->rk", rel, w)], axis=2)
+    geoms = shapely.polygons(flat)
+    geoms = shapely.make_valid(geoms)
+    order = np.argsort(group, kind="stable")
+    count = np.bincount(group, minlength=n_groups)
+    slot = np.arange(len(group)) - np.repeat(np.cumsum(count) - count, count)
+    table = np.full((n_groups, count.max()), None, dtype=object)
+    table[group[order], slot] = geoms[order]
+    unions = shapely.union_all(table, axis=1)
+    parts, part_group = shapely.get_parts(unions, return_index=True)
+    is_poly = shapely.get_type_id(parts) == 3
+    parts, part_group = parts[is_poly], part_group[is_poly]
+    if len(parts) == 0:
+        return out
+    rings, ring_part = shapely.get_rings(parts, return_index=True)
+    starts = np.r_[0, np.flatnonzero(np.diff(ring_part)) + 1]
+    exterior = np.zeros(len(rings), bool)
+    exterior[starts] = True
+    coords, ring_of = shapely.get_coordinates(rings, return_index=True)
+    counts = np.bincount(ring_of, minlength=len(rings))
+    kmax = counts.max()
+    pos = np.arange(len(coords)) - np.repeat(np.cumsum(counts) - counts, counts)
+    flat_rings = np.repeat(coords[np.cumsum(counts) - 1][:, None, :], kmax, axis=1)  # pad: last vertex
+    flat_rings[ring_of, pos] = coords
+    g_of_ring = part_group[ring_part]
+    row = first[g_of_ring]
+    ring3 = origin[row][:, None, :] + flat_rings[..., :1] * u[row][:, None, :] + flat_rings[..., 1:] * w[row][:, None, :]
+    f = lambert_pairs(x[row], nx[row], ring3)
+    np.add.at(out, g_of_ring, np.where(exterior, f, -f))
+    return np.clip(out, 0.0, None)
+
+
+def hidden_factors(x: np.ndarray, nx: np.ndarray, group: np.ndarray, source: np.ndarray,
+                   source_normal: np.ndarray, occluder: np.ndarray, occluder_normal: np.ndarray,
+                   tol: float) -> np.ndarray:
+    """Form factor of the hidden part of each group's source (rows: one occluder each).
+
+    Rows of a group share x, nx and source; the result is indexed by group (0..g-1).
+    """
+    n_groups = int(group.max()) + 1 if len(group) else 0
+    f = np.zeros(len(group))
+    polys = None
+    for s in range(0, len(group), CHUNK_SHADOWS):
+        e = min(len(group), s + CHUNK_SHADOWS)
+        p = hidden_polygons(x[s:e], source[s:e], source_normal[s:e], occluder[s:e], occluder_normal[s:e], tol)
+        if polys is None:
+            polys = np.empty((len(group),) + p.shape[1:])
+        polys[s:e] = p
+        f[s:e] = lambert_pairs(x[s:e], nx[s:e], p)
+    out = np.zeros(n_groups)
+    if n_groups == 0:
+        return out
+    lit = f > 0
+    count = np.bincount(group[lit], minlength=n_groups)
+    single = lit & (count[group] == 1)
+    np.add.at(out, group[single], f[single])
+    multi = lit & (count[group] > 1)
+    if multi.any():
+        rows = np.flatnonzero(multi)
+        groups, local = np.unique(group[rows], return_inverse=True)
+        out[groups] = union_factors(x[rows], nx[rows], local.ravel(), polys[rows], source_normal[rows])
+    return out

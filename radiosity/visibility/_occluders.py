@@ -1,0 +1,233 @@
+"""Occluder polygons, their bounding-volume hierarchy, and the exact per-pair classification.
+
+Occluder patches of one object that lie in one plane and tile a convex polygon are merged into
+that polygon (a cube's face cut into 64 patches is one occluder). Each (pair, occluder) row is
+then classified exactly, before any ray:
+
+* free: the pair lies on one side of the occluder's plane (or in it), or the bundle of the
+  16 vertex-to-vertex segments crosses the plane outside the polygon (separated by one of its
+  edges). The crossing points of all segments between two convex patches lie in the convex hull
+  of the crossing points of those 16 segments, because a central projection maps a convex
+  patch to the convex hull of its projected vertices.
+* full: all 16 crossing points lie inside the convex polygon, so every segment crosses it.
+* maybe: anything else (a patch straddles the plane, or the bundle meets an edge).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError
+
+from ..quadrature import centroids_and_areas
+from ._constants import BVH_LEAF, CHUNK_TRIPLES, MAX_OCCLUDER_VERTICES, MERGE_AREA_REL, PLANE_REL
+
+__all__ = ["Occluders", "build_occluders", "FREE", "FULL", "MAYBE"]
+
+FREE, FULL, MAYBE = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class Occluders:
+    """Convex occluder polygons as a struct of arrays, with a BVH over their boxes."""
+
+    polys: np.ndarray  # (k, m, 3) float, padded by repeating the last vertex
+    normal: np.ndarray  # (k, 3) unit normals
+    center: np.ndarray  # (k, 3) vertex mean (inside the convex polygon)
+    inward: np.ndarray  # (k, m, 3) in-plane inward normals of the edges (0 for padding edges)
+    lo: np.ndarray  # (k, 3)
+    hi: np.ndarray  # (k, 3)
+    # BVH: node boxes, children (-1 for leaves), leaf ranges into ``order``
+    node_lo: np.ndarray
+    node_hi: np.ndarray
+    node_left: np.ndarray
+    node_right: np.ndarray
+    node_start: np.ndarray
+    node_count: np.ndarray
+    order: np.ndarray
+
+    @property
+    def n_occluders(self) -> int:
+        return len(self.polys)
+
+
+def _plane_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
+    u = np.cross(normal, helper)
+    u /= np.linalg.norm(u)
+    return u, np.cross(normal, u)
+
+
+def _merge_group(quads: np.ndarray, normal: np.ndarray, area: float) -> np.ndarray | None:
+    """Convex polygon (k, 3) tiled by coplanar patches, or None if they do not tile one."""
+    u, w = _plane_basis(normal)
+    pts = quads.reshape(-1, 3)
+    origin = pts.mean(axis=0)
+    flat = np.column_stack([(pts - origin) @ u, (pts - origin) @ w])
+    try:
+        hull = ConvexHull(flat)
+    except (QhullError, ValueError):
+        return None
+    if len(hull.vertices) > MAX_OCCLUDER_VERTICES or abs(hull.volume - area) > MERGE_AREA_REL * area:
+        return None
+    ring = flat[hull.vertices]  # counter-clockwise in (u, w)
+    depth = float(np.mean((pts - origin) @ normal))
+    return origin + ring[:, :1] * u + ring[:, 1:] * w + depth * normal
+
+
+def _pad(polys: list[np.ndarray]) -> np.ndarray:
+    m = max(len(p) for p in polys)
+    out = np.empty((len(polys), m, 3))
+    for k, p in enumerate(polys):
+        out[k, :len(p)] = p
+        out[k, len(p):] = p[-1]
+    return out
+
+
+def _dedupe(quad: np.ndarray) -> np.ndarray:
+    keep = np.ones(len(quad), bool)
+    keep[1:] = np.any(quad[1:] != quad[:-1], axis=1)
+    keep[-1] &= np.any(quad[-1] != quad[0])
+    return quad[keep]
+
+
+def build_occluders(quads: np.ndarray, normals: np.ndarray, groups: np.ndarray, mask: np.ndarray,
+                    scale: float) -> Occluders:
+    """Merge the masked patches into convex occluder polygons and build their hierarchy."""
+    idx = np.flatnonzero(mask & normals.any(axis=1))
+    polys: list[np.ndarray] = []
+    if len(idx):
+        n = normals[idx]
+        # one sign per plane, so both faces of a thin wall fall in the same group
+        lead = np.take_along_axis(n, np.argmax(np.abs(n), axis=1)[:, None], axis=1)[:, 0]
+        n = n * np.sign(lead)[:, None]
+        centroid, area = centroids_and_areas(quads[idx])
+        d = np.einsum("pc,pc->p", n, centroid)
+        key = np.column_stack([groups[idx], np.round(n * 1e7), np.round(d / (1e-7 * scale))])
+        _, inverse = np.unique(key, axis=0, return_inverse=True)
+        inverse = inverse.ravel()
+        for g in range(inverse.max() + 1):
+            members = np.flatnonzero(inverse == g)
+            merged = None
+            if len(members) > 1:
+                merged = _merge_group(quads[idx[members]], n[members[0]], float(area[members].sum()))
+            if merged is not None:
+                polys.append(merged)
+            else:
+                polys.extend(_dedupe(quads[p]) for p in idx[members])
+    if not polys:
+        z = np.zeros((0, 3))
+        zi = np.zeros(0, np.int64)
+        return Occluders(np.zeros((0, 3, 3)), z, z, np.zeros((0, 3, 3)), z, z, z, z, zi, zi, zi, zi, zi)
+    P = _pad(polys)
+    centred = P - P.mean(axis=1, keepdims=True)
+    normal = np.cross(centred, np.roll(centred, -1, axis=1)).sum(axis=1)
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    center = np.stack([p.mean(axis=0) for p in polys])
+    edge = np.roll(P, -1, axis=1) - P
+    inward = np.cross(normal[:, None, :], edge)
+    length = np.linalg.norm(inward, axis=2, keepdims=True)
+    ok = length > 1e-12 * scale
+    inward = np.where(ok, inward / np.where(ok, length, 1.0), 0.0)
+    sign = np.sign(np.einsum("kmc,kmc->km", center[:, None, :] - P, inward))
+    inward *= np.where(sign < 0, -1.0, 1.0)[..., None]
+    lo, hi = P.min(axis=1), P.max(axis=1)
+    return Occluders(P, normal, center, inward, lo, hi, *_build_bvh(lo, hi))
+
+
+def _build_bvh(lo: np.ndarray, hi: np.ndarray):
+    """Median-split BVH over boxes; returns node arrays and the leaf order of the boxes."""
+    mid = 0.5 * (lo + hi)
+    order = np.arange(len(lo))
+    nodes_lo, nodes_hi, left, right, start, count = [], [], [], [], [], []
+    stack = [(0, len(lo), -1, False)]
+    while stack:
+        s, e, parent, is_right = stack.pop()
+        node = len(nodes_lo)
+        sel = order[s:e]
+        nodes_lo.append(lo[sel].min(axis=0))
+        nodes_hi.append(hi[sel].max(axis=0))
+        left.append(-1)
+        right.append(-1)
+        start.append(s)
+        count.append(e - s)
+        if parent >= 0:
+            (right if is_right else left)[parent] = node
+        if e - s > BVH_LEAF:
+            axis = int(np.argmax(np.ptp(mid[sel], axis=0)))
+            order[s:e] = sel[np.argsort(mid[sel, axis], kind="stable")]
+            half = (s + e) // 2
+            stack.append((half, e, node, True))
+            stack.append((s, half, node, False))
+    return (np.array(nodes_lo), np.array(nodes_hi), np.array(left), np.array(right), np.array(start),
+            np.array(count), order)
+
+
+def candidates(occ: Occluders, lo: np.ndarray, hi: np.ndarray, pad: float) -> tuple[np.ndarray, np.ndarray]:
+    """(row, occluder) pairs whose boxes meet: rows given by boxes lo, hi (p, 3)."""
+    if occ.n_occluders == 0 or len(lo) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    rows = np.arange(len(lo))
+    nodes = np.zeros(len(lo), np.int64)
+    out_r, out_k = [], []
+    while len(rows):
+        meet = ((lo[rows] <= occ.node_hi[nodes] + pad) & (hi[rows] >= occ.node_lo[nodes] - pad)).all(axis=1)
+        rows, nodes = rows[meet], nodes[meet]
+        leaf = occ.node_left[nodes] < 0
+        if leaf.any():
+            lr, ln = rows[leaf], nodes[leaf]
+            cnt = occ.node_count[ln]
+            rep_r = np.repeat(lr, cnt)
+            offs = np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+            k = occ.order[np.repeat(occ.node_start[ln], cnt) + offs]
+            hit = ((lo[rep_r] <= occ.hi[k] + pad) & (hi[rep_r] >= occ.lo[k] - pad)).all(axis=1)
+            out_r.append(rep_r[hit])
+            out_k.append(k[hit])
+        rows, nodes = rows[~leaf], nodes[~leaf]
+        rows = np.concatenate([rows, rows])
+        nodes = np.concatenate([occ.node_left[nodes], occ.node_right[nodes]])
+    r = np.concatenate(out_r) if out_r else np.zeros(0, np.int64)
+    k = np.concatenate(out_k) if out_k else np.zeros(0, np.int64)
+    return r, k
+
+
+def classify_rows(occ: Occluders, vi: np.ndarray, vj: np.ndarray, k: np.ndarray, scale: float) -> np.ndarray:
+    """(t,) FREE / FULL / MAYBE for rows (patch vertices vi, vj (t, 4, 3); occluder k (t,))."""
+    out = np.empty(len(k), np.int8)
+    for s in range(0, len(k), CHUNK_TRIPLES):
+        e = min(len(k), s + CHUNK_TRIPLES)
+        out[s:e] = _classify_chunk(occ, vi[s:e], vj[s:e], k[s:e], scale)
+    return out
+
+
+def _classify_chunk(occ, vi, vj, k, scale):
+    tol = PLANE_REL * scale
+    n, c = occ.normal[k], occ.center[k]
+    si = np.einsum("tvc,tc->tv", vi - c[:, None, :], n)
+    sj = np.einsum("tvc,tc->tv", vj - c[:, None, :], n)
+    on_plane = (np.abs(si).max(axis=1) <= tol) | (np.abs(sj).max(axis=1) <= tol)
+    pos_i, neg_i = si.min(axis=1) >= -tol, si.max(axis=1) <= tol
+    pos_j, neg_j = sj.min(axis=1) >= -tol, sj.max(axis=1) <= tol
+    same = (pos_i & pos_j) | (neg_i & neg_j) | on_plane
+    opposite = ~same & ((pos_i & neg_j) | (neg_i & pos_j))
+    out = np.full(len(k), MAYBE, np.int8)
+    out[same] = FREE
+    if opposite.any():
+        o = np.flatnonzero(opposite)
+        su, sv = si[o][:, :, None], sj[o][:, None, :]
+        den = su - sv
+        den_ok = (np.abs(den) > tol).all(axis=(1, 2))
+        t = su / np.where(np.abs(den) > tol, den, 1.0)
+        u, v = vi[o][:, :, None, :], vj[o][:, None, :, :]
+        m = (u + t[..., None] * (v - u)).reshape(len(o), 16, 3)
+        P, inward = occ.polys[k[o]], occ.inward[k[o]]
+        g = np.einsum("tpmc,tmc->tpm", m[:, :, None, :] - P[:, None, :, :], inward)  # (t, 16, m)
+        valid = inward.any(axis=2)[:, None, :]
+        separated = ((g < -tol) & valid).all(axis=1).any(axis=1)  # one edge has all points outside
+        inside = ((g > tol) | ~valid).all(axis=(1, 2)) & den_ok
+        state = np.full(len(o), MAYBE, np.int8)
+        state[separated] = FREE
+        state[inside & ~separated] = FULL
+        out[o] = state
+    return out
