@@ -58,37 +58,61 @@ def _is_convex(poly: np.ndarray, normal: np.ndarray) -> bool:
 def _split_triangle(tri: np.ndarray, max_size: float | None) -> np.ndarray:
     """Cells of a triangle no longer than ``max_size``, as few as the candidate splits allow.
 
-    Candidates: (1) for each vertex ``c``, the bilinear grid of the quad ``(a, b, c, c)``
-    collapsed at ``c``: ``ku`` columns along the opposite edge ``ab`` and ``kv`` rows towards
-    ``c``; every cell is a trapezoid (rows are parallel to ``ab``) or, next to ``c``, a
-    triangle; row edges are at most ``|ab| / ku``, the others at most ``max(|ca|, |cb|) / kv``.
-    A sliver gets one strip of cells instead of ``k**2`` smaller slivers. (2) Three quads
-    through the centroid and the edge midpoints, each cut on its bilinear grid: about 1.5
-    times the ideal count for a well-shaped triangle. The split with fewest cells wins (ties:
-    the first). Same winding; an unsplit triangle is returned as it is.
+    Candidates:
+
+    1. Strips: for each vertex ``c``, the bilinear grid of the quad ``(a, b, c, c)`` collapsed
+       at ``c``, ``ku`` columns along the opposite edge ``ab`` and ``kv`` rows towards ``c``.
+       Every cell is a trapezoid (rows are parallel to ``ab``) or, next to ``c``, a triangle;
+       row edges are at most ``|ab| / ku``, the others at most ``max(|ca|, |cb|) / kv``.
+    2. The two right triangles on either side of the altitude onto the longest edge, each cut
+       into strips along the altitude: an obtuse sliver becomes about ``length / size`` cells
+       instead of ``k**2`` smaller slivers.
+    3. Three quads through the centroid and the edge midpoints, each on its bilinear grid.
+
+    The split with the fewest cells wins (ties: the earlier). Same winding; a triangle that
+    needs no cut is returned as it is.
     """
-    if max_size is None:
+    if max_size is None or _strips(tri, max_size)[0] == 1:
         return np.concatenate([tri, tri[2:3]])[None]
+    candidates = [(_strips(tri, max_size)[0], lambda: _strips(tri, max_size)[1]())]
+    lengths = np.linalg.norm(np.roll(tri, -1, axis=0) - tri, axis=1)  # tri[i] -> tri[i + 1]
+    i = int(np.argmax(lengths))
+    a, b, c = tri[i], tri[(i + 1) % 3], tri[(i + 2) % 3]
+    t = float((c - a) @ (b - a) / (lengths[i] ** 2))
+    if 0.0 < t < 1.0:
+        foot = a + t * (b - a)
+        halves = (np.stack([a, foot, c]), np.stack([foot, b, c]))
+        parts = [_strips(h, max_size) for h in halves]
+        candidates.append((sum(n for n, _ in parts), lambda: np.concatenate([make() for _, make in parts])))
+    centre = tri.mean(axis=0)
+    mids = 0.5 * (tri + np.roll(tri, -1, axis=0))  # mids[k] between tri[k] and tri[k + 1]
+    quads = [np.stack([tri[k], mids[k], centre, mids[k - 1]]) for k in range(3)]
+    cuts = [_quad_cuts(q, max_size) for q in quads]
+    candidates.append((sum(ku * kv for ku, kv in cuts),
+                       lambda: np.concatenate([_split_quad(q, ku, kv) for q, (ku, kv) in zip(quads, cuts)])))
+    best = min(range(len(candidates)), key=lambda k: candidates[k][0])
+    return candidates[best][1]()
+
+
+def _strips(tri: np.ndarray, max_size: float):
+    """(cell count, maker) of the best collapsed-quad strip split of a triangle (candidate 1)."""
     best = None
     for first in range(3):
         a, b, c = tri[first], tri[(first + 1) % 3], tri[(first + 2) % 3]
         ku = _cuts(float(np.linalg.norm(b - a)), max_size)
         kv = _cuts(max(float(np.linalg.norm(c - a)), float(np.linalg.norm(c - b))), max_size)
-        if ku == 1 and kv == 1:
-            return np.concatenate([tri, tri[2:3]])[None]
         if best is None or ku * kv < best[0]:
-            best = (ku * kv, first, ku, kv)
-    centre = tri.mean(axis=0)
-    mids = 0.5 * (tri + np.roll(tri, -1, axis=0))  # mids[i] between tri[i] and tri[i + 1]
-    quads = [np.stack([tri[i], mids[i], centre, mids[i - 1]]) for i in range(3)]
-    counts = [(_quad_cuts(q, max_size)) for q in quads]
-    if sum(ku * kv for ku, kv in counts) < best[0]:
-        return np.concatenate([_split_quad(q, ku, kv) for q, (ku, kv) in zip(quads, counts)])
-    _, first, ku, kv = best
-    a, b, c = tri[first], tri[(first + 1) % 3], tri[(first + 2) % 3]
-    cells = _split_quad(np.stack([a, b, c, c]), ku, kv).reshape(ku, kv, 4, 3)
-    cells[:, -1, 2:] = c  # the cells touching c are triangles (p, q, c, c), bit for bit
-    return cells.reshape(-1, 4, 3)
+            best = (ku * kv, a, b, c, ku, kv)
+    count, a, b, c, ku, kv = best
+
+    def make() -> np.ndarray:
+        if count == 1:
+            return np.stack([a, b, c, c])[None]
+        cells = _split_quad(np.stack([a, b, c, c]), ku, kv).reshape(ku, kv, 4, 3)
+        cells[:, -1, 2:] = c  # the cells touching c are triangles (p, q, c, c), bit for bit
+        return cells.reshape(-1, 4, 3)
+
+    return count, make
 
 
 def _quad_cuts(quad: np.ndarray, max_size: float | None) -> tuple[int, int]:
