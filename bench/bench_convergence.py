@@ -83,27 +83,45 @@ def reference(size: float, *, cache_path: Path | None, fresh: bool) -> dict:
     return data
 
 
-def run_case(preset: str, imprint: bool, ref: dict) -> dict:
+def solve_case(preset: str, imprint: bool) -> dict:
+    """Solve one case; the raw result (object radiosity, patches, time)."""
     scene = _load(imprint)
     t0 = time.perf_counter()
     solution = radiosity.solve(scene, preset=preset, cache=False)
     seconds = time.perf_counter() - t0
+    return {"preset": preset, "imprint": imprint, "patches": int(solution.scene.n_patches),
+            "hidden_patches": int(solution.scene.patch_hidden.sum()), "seconds": seconds,
+            "timings": solution.timings, "commit": _commit(),
+            "objects": {k: [float(x) for x in v] for k, v in solution.object_radiosity().items()}}
+
+
+def compare(case: dict, ref: dict) -> dict:
+    """The case with its relative change per object and channel against the reference."""
     errors = {}
-    for name, value in solution.object_radiosity().items():
+    for name, value in case["objects"].items():
         if name in ref["emitters"]:
             continue
         target = np.asarray(ref["objects"][name])
-        errors[name] = [float(x) for x in (value - target) / target]
+        errors[name] = [float(x) for x in (np.asarray(value) - target) / target]
     worst = max(errors, key=lambda n: max(abs(e) for e in errors[n]))
-    return {"preset": preset, "imprint": imprint, "patches": int(solution.scene.n_patches),
-            "hidden_patches": int(solution.scene.patch_hidden.sum()), "seconds": seconds,
-            "timings": solution.timings, "worst_object": worst,
-            "worst_relative_change": max(abs(e) for e in errors[worst]), "relative_change": errors}
+    return {**case, "worst_object": worst, "worst_relative_change": max(abs(e) for e in errors[worst]),
+            "relative_change": errors}
 
 
 def main(argv=None) -> int:
-    args = _common.parse_args(__doc__.splitlines()[0], argv, extra=lambda p: p.add_argument(
-        "--new-reference", action="store_true", help="recompute the cached reference"))
+    def extra(parser):
+        parser.add_argument("--new-reference", action="store_true", help="recompute the cached reference")
+        parser.add_argument("--cases", default=None,
+                            help="JSON list of raw cases (from --save-cases) to compare instead of solving")
+        parser.add_argument("--save-cases", default=None, help="also write the raw cases to this JSON file")
+        parser.add_argument("--no-reference", action="store_true",
+                            help="only solve the cases (use with --save-cases, compare later with --cases)")
+
+    args = _common.parse_args(__doc__.splitlines()[0], argv, extra=extra)
+    if args.no_reference:
+        raw = [solve_case(p, i) for i in (True, False) for p in (("draft",) if args.quick else PRESETS)]
+        Path(args.save_cases).write_text(json.dumps(raw, indent=1))
+        return 0
     if args.quick:
         ref = reference(QUICK_REFERENCE_SIZE, cache_path=None, fresh=True)
         presets = ("draft",)
@@ -113,12 +131,21 @@ def main(argv=None) -> int:
         presets = PRESETS
     print(f"reference: {ref['patches']} patches, {ref['seconds']:.0f} s ({ref['settings']})")
     rows = []
+    raw = json.loads(Path(args.cases).read_text()) if args.cases else None
     for imprint in (True, False):
         for preset in presets:
-            case = run_case(preset, imprint, ref)
+            if raw is not None:
+                case = next(c for c in raw if c["preset"] == preset and c["imprint"] == imprint)
+            else:
+                case = solve_case(preset, imprint)
+            case = compare(case, ref)
             rows.append(case)
             print(f"{preset:8s} imprint={str(imprint):5s} {case['patches']:6d} patches {case['seconds']:7.1f} s  "
                   f"worst {case['worst_object']:12s} {100 * case['worst_relative_change']:.2f} %", flush=True)
+    if args.save_cases:
+        Path(args.save_cases).write_text(json.dumps([{k: v for k, v in r.items() if k in (
+            "preset", "imprint", "patches", "hidden_patches", "seconds", "timings", "commit", "objects")}
+            for r in rows], indent=1))
     payload = {"scene": "cornell_box", "reference": {k: ref[k] for k in ("settings", "patches", "seconds", "commit")},
                "commit": _commit(), "quick": bool(args.quick), "cases": rows}
     if args.quick and args.out is None:
