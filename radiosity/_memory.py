@@ -16,11 +16,13 @@ import math
 import os
 from pathlib import Path
 
+import numpy as np
+
 from . import _tol
 from ._errors import MemoryBudgetError
 
-__all__ = ["ENV_BUDGET", "budget_bytes", "check", "check_fill", "check_solve", "check_rays",
-           "fill_bytes", "solve_bytes", "format_bytes"]
+__all__ = ["ENV_BUDGET", "budget_bytes", "check", "check_fill", "check_solve", "check_rays", "check_patches",
+           "patch_bound", "fill_bytes", "solve_bytes", "format_bytes"]
 
 ENV_BUDGET = "RADIOSITY_MEMORY_BUDGET"
 
@@ -40,6 +42,10 @@ DIRECT_BYTES_PER_PAIR = 16
 # Bytes per shadow ray in flight: float64 origins, ends and directions (72), their float32
 # copies for Embree (24), distances and weights (~24), with headroom for temporaries.
 BYTES_PER_RAY = 160
+
+# Bytes per patch while faces are cut: the (n, 4, 3) float64 patch array (96 bytes), the
+# sub-grids it is cut from and the concatenation copy, with headroom.
+BYTES_PER_PATCH = 400
 
 # The knob to turn, worded for both the Python API and the command line.
 _COARSER = "use a coarser preset (--preset draft) or a larger max_patch_size (--max-patch-size)"
@@ -189,3 +195,54 @@ def check_rays(n_rays: int, *, budget: int | None = None) -> int:
     """Raise before a batch of ``n_rays`` shadow rays that would not fit in memory."""
     return check(f"a batch of {n_rays:,} shadow rays", int(n_rays) * BYTES_PER_RAY,
                  "use fewer visibility samples (--preset draft)", budget=budget)
+
+
+def patch_bound(vertices: np.ndarray, faces: list[np.ndarray], max_patch_size: float | None) -> int:
+    """An upper bound on the patches that cutting ``faces`` to ``max_patch_size`` makes.
+
+    A face of k vertices is at most k - 2 triangles, and a triangle whose bounding box is e
+    across has edges of at most sqrt(3) e, so it is cut into at most ceil(sqrt(3) e / s)^2
+    pieces. Vectorised over faces (segment reductions), so it costs far less than the cut.
+
+    Parameters
+    ----------
+    vertices : (v, 3) float
+        Metres.
+    faces : list of (k,) int
+    max_patch_size : float or None
+        Metres; None keeps faces whole.
+
+    Examples
+    --------
+    >>> square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    >>> patch_bound(square, [np.arange(4)], 0.5)
+    32
+    """
+    if not faces:
+        return 0
+    sizes = np.fromiter((len(f) for f in faces), dtype=np.int64, count=len(faces))
+    pieces = np.maximum(sizes - 2, 1)
+    if max_patch_size is None:
+        return int(pieces.sum())
+    points = vertices[np.concatenate(faces)]
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    extent = (np.maximum.reduceat(points, starts, axis=0) - np.minimum.reduceat(points, starts, axis=0)).max(axis=1)
+    cuts = np.maximum(np.ceil(np.sqrt(3.0) * extent / max_patch_size), 1.0)
+    return int(min((pieces * cuts**2).sum(), 2.0**62))
+
+
+def check_patches(vertices: np.ndarray, faces: list[np.ndarray], max_patch_size: float | None, *,
+                  budget: int | None = None) -> int:
+    """Raise before cutting faces into more patches than memory holds; return the bound.
+
+    Examples
+    --------
+    >>> square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    >>> check_patches(square, [np.arange(4)], 0.5, budget=10**6)
+    32
+    """
+    n = patch_bound(vertices, faces, max_patch_size)
+    size = "" if max_patch_size is None else f" (max_patch_size {max_patch_size:.3g} m)"
+    check(f"cutting the faces into up to {n:,} patches{size}", n * BYTES_PER_PATCH,
+          "use a larger max_patch_size (--max-patch-size) or a coarser preset (--preset draft)", budget=budget)
+    return n

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import _memory
 from ._errors import RadiosityWarning, SceneError
 from ._validate import reject_unknown
 from .formfactors import polygon_normals
@@ -191,6 +192,7 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
         raise ValueError(f"max_patch_size must be a positive number of metres, got {max_patch_size!r}")
     data = read_obj(path)
     vertices = data.vertices * UNITS[units or "m"]
+    _memory.check_patches(vertices, data.faces, max_patch_size)  # refuse before cutting, not during
     if options.get("imprint", True):
         patches, report, _ = subdivide_imprinted(vertices, data.faces, data.face_object, max_patch_size)
     else:

@@ -15,6 +15,36 @@ def add_args(parser) -> None:
     parser.add_argument("--screenshot", type=Path, default=None, help="save a PNG instead of opening a window")
 
 
+def read_result(path: Path):
+    """The solved mesh of ``radiosity solve`` (a VTK XML .vtp with 'radiosity' point data)."""
+    import logging
+    import warnings
+
+    import pyvista as pv
+
+    if not path.exists():
+        raise SceneError(f"{path}: no such result; run 'radiosity solve -o OUTDIR' first")
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(256).lstrip()
+    except OSError as exc:
+        raise SceneError(f"cannot read result '{path}': {exc.strerror or exc}") from None
+    if not (head.startswith(b"<?xml") or head.startswith(b"<VTKFile")):
+        raise SceneError(f"{path}: not a radiosity result (not a VTK .vtp file)")
+    # A damaged file makes VTK log errors and warn; we report it as one line instead.
+    previous = logging.root.manager.disable
+    logging.disable(logging.CRITICAL)
+    try:
+        with warnings.catch_warnings(), pv.vtk_verbosity("off"):
+            warnings.simplefilter("ignore")
+            mesh = pv.read(str(path))
+    finally:
+        logging.disable(previous)
+    if mesh.n_points == 0 or "radiosity" not in mesh.point_data:
+        raise SceneError(f"{path}: not a radiosity result (no 'radiosity' point data; damaged or another file)")
+    return mesh
+
+
 def run(args) -> int:
     import numpy as np
     import pyvista as pv
@@ -22,11 +52,7 @@ def run(args) -> int:
     from ..viz import tone_map
 
     path = args.result / "solution.vtp" if args.result.is_dir() else args.result
-    if not path.exists():
-        raise SceneError(f"{path}: no such result; run 'radiosity solve -o OUTDIR' first")
-    mesh = pv.read(str(path))
-    if "radiosity" not in mesh.point_data:
-        raise SceneError(f"{path}: not a radiosity result (no 'radiosity' point data)")
+    mesh = read_result(path)
     radiance = np.asarray(mesh.point_data["radiosity"]) / np.pi
     level = np.percentile(radiance.max(axis=1), 90) or 1.0
     mesh.point_data["rgb"] = tone_map(radiance, 0.85 / level)

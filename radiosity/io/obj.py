@@ -244,8 +244,9 @@ def read_obj(path) -> ObjData:
             if len(tokens) < 3:
                 raise SceneError(f"{where}: face {face_number} has {len(tokens)} vertices; a face needs at least 3")
             idx = [_face_index(t, len(vertices), where, face_number) for t in tokens]
-            # Drop repeated consecutive vertices (f 1 2 2 3); a face left with < 3 has zero area.
-            idx = [v for k, v in enumerate(idx) if v != idx[k - 1]] or idx[:1]
+            # Drop repeated consecutive corners (f 1 2 2 3, or two vertices at the same point):
+            # they add zero-length edges. A face left with fewer than 3 has zero area.
+            idx = [v for k, v in enumerate(idx) if v != idx[k - 1] and vertices[v] != vertices[idx[k - 1]]] or idx[:1]
             if current_object < 0:
                 current_object = object_index.setdefault(path.stem, len(objects))
                 if current_object == len(objects):
