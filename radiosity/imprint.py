@@ -220,7 +220,8 @@ def _regions_of(receiver: _Part, parts: list[_Part], part_points: np.ndarray, pa
                 hidden = True
             else:  # exactly coplanar, facing the same way: the smaller face lies on top
                 hidden = (other.area, other.face) < (receiver.area, receiver.face)
-            regions.append((region, hidden, "overlap", other.obj))
+            if hidden:  # a face under the receiver changes nothing on its lit side
+                regions.append((region, hidden, "overlap", other.obj))
             continue
         d = dist[part_of_point == index]
         on = np.abs(d) <= tol
