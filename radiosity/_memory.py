@@ -22,7 +22,7 @@ from . import _tol
 from ._errors import MemoryBudgetError
 
 __all__ = ["ENV_BUDGET", "budget_bytes", "check", "check_fill", "check_solve", "check_rays", "check_patches",
-           "patch_bound", "fill_bytes", "solve_bytes", "format_bytes"]
+           "check_cut", "patch_bound", "fill_bytes", "solve_bytes", "format_bytes"]
 
 ENV_BUDGET = "RADIOSITY_MEMORY_BUDGET"
 
@@ -245,4 +245,26 @@ def check_patches(vertices: np.ndarray, faces: list[np.ndarray], max_patch_size:
     size = "" if max_patch_size is None else f" (max_patch_size {max_patch_size:.3g} m)"
     check(f"cutting the faces into up to {n:,} patches{size}", n * BYTES_PER_PATCH,
           "use a larger max_patch_size (--max-patch-size) or a coarser preset (--preset draft)", budget=budget)
+    return n
+
+
+def check_cut(quads: np.ndarray, max_patch_size: float, *, budget: int | None = None) -> int:
+    """Raise before cutting existing patches (n, 4, 3) again to ``max_patch_size``; return the bound.
+
+    Meant for ``Scene.resubdivided`` (``solve`` cutting a scene to a preset or to
+    ``--max-patch-size``), where a tiny size would otherwise fail inside numpy.
+
+    Examples
+    --------
+    >>> quad = np.array([[[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]], float)
+    >>> check_cut(quad, 0.5, budget=10**6)
+    32
+    """
+    quads = np.asarray(quads, dtype=float)
+    extent = np.ptp(quads, axis=1).max(axis=1) if len(quads) else np.zeros(0)
+    cuts = np.maximum(np.ceil(np.sqrt(3.0) * extent / max_patch_size), 1.0)
+    n = int(min((2 * cuts**2).sum(), 2.0**62))  # a quad is at most two triangles
+    check(f"cutting the scene into up to {n:,} patches (max_patch_size {max_patch_size:.3g} m)",
+          n * BYTES_PER_PATCH, "use a larger max_patch_size (--max-patch-size) or a coarser preset (--preset draft)",
+          budget=budget)
     return n
