@@ -25,8 +25,15 @@ class Options:
     far_separation : float
         Distance between centroids over the sum of circumradii beyond which one point is used.
     visibility_samples : int
-        Sample points per direction on each patch of a pair that may be blocked
+        Sample points per direction on each patch of a pair that may be blocked, first round
         (``visibility_samples**4`` rays per pair).
+    visibility : {"auto", "rays", "exact"}
+        Partly occluded pairs: adaptive stratified rays, exact shadow clipping, or exact only
+        where rays would likely miss by more than ``visibility_rtol``.
+    visibility_max_samples : int
+        Points per direction on each patch for pairs whose first-round rays disagree.
+    visibility_rtol : float
+        Absolute error per view factor that ``"auto"`` accepts from rays.
     solver : {"auto", "direct", "bicgstab", "gmres", "jacobi", "gauss-seidel", "progressive"}
     rtol : float
         Relative residual at which iterative solvers stop.
@@ -39,6 +46,9 @@ class Options:
     near_order: int = 3
     far_separation: float = 3.0
     visibility_samples: int = 2
+    visibility: str = "auto"
+    visibility_max_samples: int = 4
+    visibility_rtol: float = 1e-4
     solver: str = "auto"
     rtol: float = 1e-10
     cache: bool = True
@@ -54,7 +64,9 @@ class Options:
 
 
 PRESETS = {
-    "draft": Options(patch_size_rel=1 / 12, near_order=2, far_separation=2.0, visibility_samples=2),
+    "draft": Options(patch_size_rel=1 / 12, near_order=2, far_separation=2.0, visibility_samples=2,
+                     visibility="rays", visibility_max_samples=3, visibility_rtol=1e-3),
     "default": Options(),
-    "fine": Options(patch_size_rel=1 / 50, near_order=4, far_separation=4.0, visibility_samples=3),
+    "fine": Options(patch_size_rel=1 / 50, near_order=4, far_separation=4.0, visibility_samples=3,
+                    visibility_max_samples=5, visibility_rtol=1e-5),
 }

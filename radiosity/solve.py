@@ -33,7 +33,9 @@ class Prepared:
 
 def _fill_settings(options: Options) -> FillSettings:
     return FillSettings(near_order=options.near_order, far_separation=options.far_separation,
-                        visibility_samples=options.visibility_samples)
+                        visibility_samples=options.visibility_samples, visibility=options.visibility,
+                        visibility_max_samples=options.visibility_max_samples,
+                        visibility_rtol=options.visibility_rtol)
 
 
 def _cut(scene: Scene, options: Options) -> Scene:
@@ -72,7 +74,7 @@ def prepare(scene: Scene, options: Options) -> Prepared:
             timings["cache"] = time.perf_counter() - t0 - timings["patches"]
             return Prepared(cut, F, stats, timings, cache_hit=True)
     visibility = Visibility(cut.patch_quads, cut.patch_normal, cut.patch_object, cut.scale,
-                            samples=settings.visibility_samples)
+                            samples=settings.visibility_samples, max_samples=settings.visibility_max_samples)
     update, close = _progress_bar(options.progress, cut.n_patches, "form factors")
     try:
         F, stats = assemble(cut.patch_quads, cut.patch_normal, cut.patch_centroid, cut.patch_area,
