@@ -265,17 +265,18 @@ def _patch_materials(data, patches: Patches, emission: str, allow_clamp: bool, n
     ke = np.array([m.ke for m in data.materials] + [(0.0, 0.0, 0.0)], dtype=float).reshape(n_mat + 1, 3)
     for m in data.materials:
         kd_text = " ".join(f"{v:g}" for v in m.kd)
+        kd_where, ke_where = m.kd_where or m.where, m.ke_where or m.where
         if min(m.kd) < 0:
-            raise SceneError(f"{m.where}: material {m.name!r} has Kd {kd_text}; reflectance must be in "
+            raise SceneError(f"{kd_where}: material {m.name!r} has Kd {kd_text}; reflectance must be in "
                              "[0, 1) per channel, and a negative one is never valid")
         if max(m.kd) >= 1 and not allow_clamp:
-            raise SceneError(f"{m.where}: material {m.name!r} has Kd {kd_text}; reflectance must be in "
+            raise SceneError(f"{kd_where}: material {m.name!r} has Kd {kd_text}; reflectance must be in "
                              "[0, 1) per channel (1 or more never converges); allow_clamp=True "
                              "(--allow-clamp) clamps it to 0.999")
         if max(m.kd) >= 1 and notes is not None:
-            notes.append(f"{m.where}: material {m.name!r} has Kd {kd_text}; clamped to 0.999 (allow_clamp)")
+            notes.append(f"{kd_where}: material {m.name!r} has Kd {kd_text}; clamped to 0.999 (allow_clamp)")
         if min(m.ke) < 0:
-            raise SceneError(f"{m.where}: material {m.name!r} has negative Ke "
+            raise SceneError(f"{ke_where}: material {m.name!r} has negative Ke "
                              f"{' '.join(f'{v:g}' for v in m.ke)}; emission must be >= 0")
     if allow_clamp and (kd >= 1).any():
         if notes is None:

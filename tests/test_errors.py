@@ -79,7 +79,7 @@ def test_reflectance_one_refused_unless_clamped(tmp_path):
     mtl = "newmtl white\nKd 1 0.5 1\nnewmtl lamp\nKe 1 1 1\n"
     body = FLOOR.replace("grey", "white") + LAMP
     path = scene_file(tmp_path, body, mtl)
-    with pytest.raises(SceneError, match=r"m\.mtl:1: material 'white' has Kd 1 0\.5 1; reflectance must be "
+    with pytest.raises(SceneError, match=r"m\.mtl:2: material 'white' has Kd 1 0\.5 1; reflectance must be "
                                          r"in \[0, 1\) per channel .*allow_clamp=True \(--allow-clamp\)"):
         radiosity.load_scene(path)
     with pytest.warns(RadiosityWarning, match="material 'white' has Kd 1 0.5 1; clamped to 0.999"):

@@ -48,7 +48,9 @@ class Material:
     name: str
     kd: tuple[float, float, float] = (0.0, 0.0, 0.0)
     ke: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    where: str = ""
+    where: str = ""  # file:line of its newmtl
+    kd_where: str = ""  # file:line of its Kd (errors about the value point there)
+    ke_where: str = ""
 
 
 @dataclass
@@ -167,6 +169,7 @@ def read_mtl(path: Path, referenced_from: str = "", notes: list[str] | None = No
             if len(values) == 1:
                 values = values * 3
             setattr(current, keyword.lower(), tuple(values))
+            setattr(current, f"{keyword.lower()}_where", where)
     return materials
 
 
@@ -234,7 +237,7 @@ def read_obj(path) -> ObjData:
         keyword, *tokens = line.split()
         where = f"{path}:{number}"
         if keyword == "v":
-            xyz = _floats(tokens, 3, where, "vertex")
+            xyz = _floats(tokens, 3, where, f"vertex {len(vertices) + 1}")
             if max(abs(c) for c in xyz) > MAX_COORDINATE:
                 raise SceneError(f"{where}: vertex {len(vertices) + 1} has a coordinate beyond "
                                  f"{MAX_COORDINATE:g}: {' '.join(tokens[:3])!r}")
