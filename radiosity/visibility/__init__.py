@@ -23,11 +23,10 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from .. import _tol
-from ..formfactors import lambert_pairs
 from ..quadrature import patch_points
 from . import _occluders
 from ._constants import CHUNK_SHADOWS, PLANE_REL, WEIGHT_FLOOR_REL
-from ._exact import hidden_factors
+from ._exact import hidden_factors, point_factors
 from ._occluders import FREE, FULL, MAYBE, build_occluders
 
 __all__ = ["Visibility", "occluder_mask", "FREE", "FULL", "MAYBE"]
@@ -250,7 +249,7 @@ class Visibility:
         q = pts.shape[1]
         x = pts[i].reshape(-1, 3)  # (m*q, 3), point p*q + a
         nx = np.repeat(self.normals[i], q, axis=0)
-        unocc = lambert_pairs(x, nx, np.repeat(self.quads[j], q, axis=0)).reshape(-1, q)
+        unocc = point_factors(x, nx, np.repeat(self.quads[j], q, axis=0)).reshape(-1, q)
         # one row per (maybe occluder, receiver point)
         r = np.repeat(rows, q)
         a = np.tile(np.arange(q), len(rows))
@@ -298,7 +297,7 @@ class Visibility:
             local = np.full(len(j), -1)
             local[part] = np.arange(len(part))
             x, nx, jj = points[part], normals[part], j[part]
-            unocc = lambert_pairs(x, nx, self.quads[jj])
+            unocc = point_factors(x, nx, self.quads[jj])
             r = local[rows]
             hidden = np.zeros(len(part))
             _, group = np.unique(r, return_inverse=True)

@@ -19,10 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..formfactors import lambert_pairs
-from ._constants import CHUNK_SHADOWS
 
-__all__ = ["clip_convex", "hidden_polygons", "union_factors"]
+__all__ = ["clip_convex", "hidden_polygons", "hidden_factors", "point_factors", "union_factors"]
 
 
 def clip_convex(poly: np.ndarray, h: np.ndarray) -> np.ndarray:
@@ -163,7 +161,7 @@ def union_factors(x: np.ndarray, nx: np.ndarray, group: np.ndarray, polys: np.nd
     g_of_ring = part_group[ring_part]
     row = first[g_of_ring]
     ring3 = origin[row][:, None, :] + flat_rings[..., :1] * u[row][:, None, :] + flat_rings[..., 1:] * w[row][:, None, :]
-    f = lambert_pairs(x[row], nx[row], ring3)
+    f = point_factors(x[row], nx[row], ring3)
     np.add.at(out, g_of_ring, np.where(exterior, f, -f))
     return np.clip(out, 0.0, None)
 
@@ -173,21 +171,19 @@ def hidden_factors(x: np.ndarray, nx: np.ndarray, group: np.ndarray, source: np.
                    tol: float) -> np.ndarray:
     """Form factor of the hidden part of each group's source (rows: one occluder each).
 
-    Rows of a group share x, nx and source; the result is indexed by group (0..g-1).
+    Rows of a group share x, nx and source; the result is indexed by group (0..g-1). Rows are
+    clipped by the compiled kernel; groups where two or more occluders hide something are
+    united with shapely.
     """
+    from ._exact_kernel import hidden_rows
+
     n_groups = int(group.max()) + 1 if len(group) else 0
-    f = np.zeros(len(group))
-    polys = None
-    for s in range(0, len(group), CHUNK_SHADOWS):
-        e = min(len(group), s + CHUNK_SHADOWS)
-        p = hidden_polygons(x[s:e], source[s:e], source_normal[s:e], occluder[s:e], occluder_normal[s:e], tol)
-        if polys is None:
-            polys = np.empty((len(group),) + p.shape[1:])
-        polys[s:e] = p
-        f[s:e] = lambert_pairs(x[s:e], nx[s:e], p)
     out = np.zeros(n_groups)
     if n_groups == 0:
         return out
+    args = [np.ascontiguousarray(a, dtype=np.float64) for a in (x, nx, source, source_normal, occluder,
+                                                                occluder_normal)]
+    f, _, _ = hidden_rows(*args, float(tol), False)
     lit = f > 0
     count = np.bincount(group[lit], minlength=n_groups)
     single = lit & (count[group] == 1)
@@ -195,6 +191,16 @@ def hidden_factors(x: np.ndarray, nx: np.ndarray, group: np.ndarray, source: np.
     multi = lit & (count[group] > 1)
     if multi.any():
         rows = np.flatnonzero(multi)
+        _, polys, _ = hidden_rows(*(a[rows] for a in args), float(tol), True)
         groups, local = np.unique(group[rows], return_inverse=True)
-        out[groups] = union_factors(x[rows], nx[rows], local.ravel(), polys[rows], source_normal[rows])
+        out[groups] = union_factors(x[rows], nx[rows], local.ravel(), polys, source_normal[rows])
     return out
+
+
+def point_factors(x: np.ndarray, nx: np.ndarray, polys: np.ndarray) -> np.ndarray:
+    """Lambert form factor from points (r, 3) with normals to polygons (r, k, 3) (compiled)."""
+    from ._exact_kernel import point_factors as kernel
+
+    counts = np.full(len(x), polys.shape[1], np.int64)
+    return kernel(np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(nx, dtype=np.float64),
+                  np.ascontiguousarray(polys, dtype=np.float64), counts)

@@ -193,7 +193,22 @@ def candidates(occ: Occluders, lo: np.ndarray, hi: np.ndarray, pad: float) -> tu
 
 
 def classify_rows(occ: Occluders, vi: np.ndarray, vj: np.ndarray, k: np.ndarray, scale: float) -> np.ndarray:
-    """(t,) FREE / FULL / MAYBE for rows (patch vertices vi, vj (t, 4, 3); occluder k (t,))."""
+    """(t,) FREE / FULL / MAYBE for rows (patch vertices vi, vj (t, 4, 3); occluder k (t,)).
+
+    Runs the compiled kernel; ``_classify_chunk`` is the same test in numpy (the reference).
+    """
+    from ._exact_kernel import classify_rows as kernel
+
+    if len(k) == 0:
+        return np.zeros(0, np.int8)
+    return kernel(np.ascontiguousarray(vi, dtype=np.float64), np.ascontiguousarray(vj, dtype=np.float64),
+                  occ.polys, occ.normal, occ.center, occ.inward, np.ascontiguousarray(k, dtype=np.int64),
+                  PLANE_REL * scale)
+
+
+def classify_rows_numpy(occ: Occluders, vi: np.ndarray, vj: np.ndarray, k: np.ndarray, scale: float
+                        ) -> np.ndarray:
+    """Reference implementation of :func:`classify_rows` in numpy (chunked)."""
     out = np.empty(len(k), np.int8)
     for s in range(0, len(k), CHUNK_TRIPLES):
         e = min(len(k), s + CHUNK_TRIPLES)

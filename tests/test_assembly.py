@@ -1,0 +1,177 @@
+"""The view-factor matrix with occlusion: known answers, closure, reciprocity, settings."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from helpers import BLOCKED_PARALLEL_SQUARES, PARALLEL_SQUARES, write_obj
+
+pytest.importorskip("embreex")
+
+import radiosity  # noqa: E402
+from radiosity.assembly import FillSettings, assemble  # noqa: E402
+from radiosity.formfactors import polygon_normals  # noqa: E402
+from radiosity.quadrature import centroids_and_areas  # noqa: E402
+from radiosity.visibility import Visibility  # noqa: E402
+
+HALF_BLOCKED = PARALLEL_SQUARES[1.0] / 2  # a half-plane blocker at mid-height hides half, by symmetry
+
+
+def grid(n, z, *, down, x0=0.0, x1=1.0, y0=0.0, y1=1.0):
+    """An (x0..x1) x (y0..y1) rectangle at height z cut into n x n patches."""
+    xs, ys = np.linspace(x0, x1, n + 1), np.linspace(y0, y1, n + 1)
+    a, b = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    a, b = a.ravel(), b.ravel()
+    q = np.stack([np.column_stack([xs[a], ys[b]]), np.column_stack([xs[a + 1], ys[b]]),
+                  np.column_stack([xs[a + 1], ys[b + 1]]), np.column_stack([xs[a], ys[b + 1]])], axis=1)
+    q = np.concatenate([q, np.full(q.shape[:2] + (1,), float(z))], axis=2)
+    return q[:, ::-1].copy() if down else q
+
+
+def fill(parts, settings, *, groups=None, **vis_kw):
+    quads = np.concatenate(parts)
+    groups = np.repeat(np.arange(len(parts)), [len(p) for p in parts]) if groups is None else groups
+    normals = polygon_normals(quads)
+    centroid, area = centroids_and_areas(quads)
+    scale = float(np.linalg.norm(np.ptp(quads.reshape(-1, 3), axis=0)))
+    vis = Visibility(quads, normals, groups, scale, samples=settings.visibility_samples,
+                     max_samples=settings.visibility_max_samples, **vis_kw)
+    F, stats = assemble(quads, normals, centroid, area, vis, settings)
+    return F.toarray(), area, stats
+
+
+def plate_total(F, area, n):
+    m = n * n
+    return float((area[:m, None] * F[:m, m:2 * m]).sum())
+
+
+EXACT = FillSettings(near_order=6, far_separation=1e9, visibility="exact")
+RAYS = FillSettings(near_order=3, far_separation=1e9, visibility="rays", visibility_samples=3,
+                    visibility_max_samples=6)
+
+
+@pytest.mark.parametrize("blocker, expected", [
+    (grid(1, 0.5, down=False, x0=0.25, x1=0.75, y0=0.25, y1=0.75), BLOCKED_PARALLEL_SQUARES),
+    (grid(1, 0.5, down=False, x0=-1, x1=2, y0=-1, y1=0.5), HALF_BLOCKED),
+    (grid(1, 0.5, down=False, x0=-1, x1=2, y0=-1, y1=2), 0.0),
+], ids=["centred", "half", "full"])
+def test_blocked_plates_exact(blocker, expected):
+    n = 2  # patch edges at 0.5: the exact integrand is smooth on every patch
+    F, area, stats = fill([grid(n, 0, down=False), grid(n, 1, down=True), blocker], EXACT)
+    assert plate_total(F, area, n) == pytest.approx(expected, abs=1e-9)
+    assert stats.n_rays == 0
+
+
+def test_full_blocking_needs_no_rays_and_no_clipping():
+    blocker = grid(1, 0.5, down=False, x0=-1, x1=2, y0=-1, y1=2)
+    for settings in (EXACT, RAYS):
+        F, area, stats = fill([grid(3, 0, down=False), grid(3, 1, down=True), blocker], settings)
+        assert plate_total(F, area, 3) == 0.0
+        assert stats.n_rays == 0 and stats.n_traced_pairs == 0 and stats.n_blocked_pairs == 2 * 81
+
+
+def test_shadow_edge_crossing_patches():
+    """n = 3: the half blocker's shadow edge runs through the middle row of patches."""
+    blocker = grid(1, 0.5, down=False, x0=-1, x1=2, y0=-1, y1=0.5)
+    settings = FillSettings(near_order=5, far_separation=1e9, visibility="exact")
+    F, area, stats = fill([grid(3, 0, down=False), grid(3, 1, down=True), blocker], settings)
+    assert stats.n_exact_pairs > 0
+    assert plate_total(F, area, 3) == pytest.approx(HALF_BLOCKED, rel=1e-6)
+    F, area, _ = fill([grid(3, 0, down=False), grid(3, 1, down=True), blocker], RAYS)
+    assert plate_total(F, area, 3) == pytest.approx(HALF_BLOCKED, rel=2e-2)
+
+
+def test_blocked_plates_rays_and_auto():
+    blocker = grid(1, 0.5, down=False, x0=0.25, x1=0.75, y0=0.25, y1=0.75)
+    parts = [grid(4, 0, down=False), grid(4, 1, down=True), blocker]
+    F, area, stats = fill(parts, RAYS)
+    assert stats.n_rays > 0 and stats.n_exact_pairs == 0
+    assert plate_total(F, area, 4) == pytest.approx(BLOCKED_PARALLEL_SQUARES, rel=1e-2)
+    auto = FillSettings(near_order=4, far_separation=1e9, visibility="auto", visibility_rtol=1e-9)
+    F, area, stats = fill(parts, auto)
+    assert stats.n_exact_pairs == stats.n_traced_pairs > 0
+    assert plate_total(F, area, 4) == pytest.approx(BLOCKED_PARALLEL_SQUARES, rel=1e-6)
+
+
+def test_load_scene_plates_with_blocker(tmp_path):
+    """Through the OBJ loader; plates and blocker in one object (self-occlusion of a non-convex one)."""
+    lower = grid(1, 0, down=False)[0]
+    upper = grid(1, 1, down=True)[0]
+    blocker = grid(1, 0.5, down=False, x0=0.25, x1=0.75, y0=0.25, y1=0.75)[0]
+    path = write_obj(tmp_path / "plates.obj", {"thing": [lower, upper, blocker]})
+    scene = radiosity.load_scene(path, max_patch_size=0.5)
+    vis = Visibility(scene.patch_quads, scene.patch_normal, scene.patch_object, scene.scale)
+    F, _ = assemble(scene.patch_quads, scene.patch_normal, scene.patch_centroid, scene.patch_area, vis, EXACT)
+    F = F.toarray()
+    z = scene.patch_centroid[:, 2]
+    low, up = np.flatnonzero(np.isclose(z, 0)), np.flatnonzero(np.isclose(z, 1))
+    total = float((scene.patch_area[low, None] * F[np.ix_(low, up)]).sum())
+    assert total == pytest.approx(BLOCKED_PARALLEL_SQUARES, abs=1e-9)
+
+
+def u_channel():
+    """Floor, two side walls and a fin standing on the floor: one non-convex object."""
+    floor = grid(4, 0, down=False, x0=0, x1=2, y0=0, y1=1)
+    ceiling = grid(4, 1, down=True, x0=0, x1=2, y0=0, y1=1)
+    fin = np.array([[[1, 0, 0], [1, 1, 0], [1, 1, 0.6], [1, 0, 0.6]]], float)
+    fin_back = fin[:, ::-1].copy()
+    return [floor, ceiling, fin, fin_back]
+
+
+def test_self_occlusion_in_a_non_convex_object_reciprocity_and_rays_vs_exact():
+    parts = u_channel()
+    groups = np.zeros(sum(len(p) for p in parts), int)
+    exact = FillSettings(near_order=4, far_separation=1e9, visibility="exact")
+    F, area, stats = fill(parts, exact, groups=groups)
+    assert stats.n_traced_pairs > 0
+    AF = area[:, None] * F
+    np.testing.assert_allclose(AF, AF.T, atol=2e-4 * AF.max())
+    rays = FillSettings(near_order=4, far_separation=1e9, visibility="rays", visibility_samples=4,
+                        visibility_max_samples=8)
+    Fr, _, _ = fill(parts, rays, groups=groups)
+    floor_to_ceiling = slice(0, 16), slice(16, 32)
+    assert Fr[floor_to_ceiling].sum() == pytest.approx(F[floor_to_ceiling].sum(), rel=3e-3)
+    np.testing.assert_allclose(Fr, F, atol=4e-3)  # per pair: rays (8 x 8 points) and order-4 shadows
+
+
+def test_reciprocity_plates_exact():
+    blocker = grid(1, 0.5, down=False, x0=0.3, x1=0.8, y0=0.2, y1=0.6)
+    F, area, _ = fill([grid(3, 0, down=False), grid(3, 1, down=True), blocker], EXACT)
+    AF = area[:, None] * F
+    # per pair, the shadow's kinks inside a receiver limit Gauss quadrature to about 1% ...
+    np.testing.assert_allclose(AF, AF.T, atol=2e-2 * AF.max())
+    # ... while the plate-to-plate totals (smooth integrands per patch) agree far better
+    assert AF[:9, 9:18].sum() == pytest.approx(AF[9:18, :9].sum(), rel=1e-4)
+
+
+def closed_cube(n):
+    """Unit cube cut into n x n patches per face, normals inward."""
+    faces = []
+    for order in ([0, 1, 2], [2, 0, 1], [1, 2, 0]):
+        for side in (0.0, 1.0):
+            q = grid(n, side, down=False)[..., order]
+            inward = np.einsum("nc,nc->n", polygon_normals(q), 0.5 - q.mean(axis=1)) > 0
+            faces.append(np.where(inward[:, None, None], q, q[:, ::-1]))
+    return faces
+
+
+@pytest.mark.parametrize("cull", [True, False])
+def test_closed_cube_stays_closed_with_rays(cull):
+    """Every patch blocks; with culling off every pair is traced: no ray may self-shadow."""
+    settings = FillSettings(near_order=4, visibility="rays")
+    F, area, stats = fill(closed_cube(3), settings, cull=cull)
+    np.testing.assert_allclose(F.sum(axis=1), 1.0, atol=2e-3)
+    if not cull:
+        assert stats.n_rays > 0
+        free, _, _ = fill(closed_cube(3), settings)
+        np.testing.assert_array_equal(F, free)  # fractions exactly 1
+
+
+def test_fill_settings_validate():
+    with pytest.raises(ValueError, match="visibility must be one of"):
+        FillSettings(visibility="magic")
+    with pytest.raises(ValueError, match="visibility_samples"):
+        FillSettings(visibility_samples=0)
+    with pytest.raises(ValueError, match="visibility_rtol"):
+        FillSettings(visibility_rtol=-1.0)
