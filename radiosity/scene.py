@@ -239,7 +239,8 @@ def _units_notes(data, units: str | None) -> list[str]:
     if extent <= _MM_HINT_EXTENT:
         return []
     return [f"{data.path}: the scene is {extent:.4g} m across (more than {_MM_HINT_EXTENT:g} m); if its "
-            f"coordinates are millimetres, give units='mm' (--units mm); units='m' silences this"]
+            f"coordinates are millimetres, give units='mm' (--units mm); units='m' (--units m) keeps metres "
+            "without this note"]
 
 
 def _face_notes(data, report) -> list[str]:

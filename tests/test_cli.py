@@ -180,6 +180,23 @@ def test_missing_scene_and_bad_output_folder(tmp_path, capsys):
     assert_one_line_error(capsys, code, "a_file: exists and is not a folder")
 
 
+def test_unwritable_output_folder_fails_before_solving(tmp_path, capsys, monkeypatch):
+    from radiosity.cli import _solve
+    from radiosity.io import export
+
+    def denied(**kwargs):
+        raise PermissionError(13, "Permission denied", str(tmp_path / "out" / ".x"))
+
+    def never(*args, **kwargs):
+        raise AssertionError("solved before checking the output folder")
+
+    monkeypatch.setattr(export.tempfile, "mkdtemp", denied)
+    monkeypatch.setattr(_solve, "solve", never)
+    code = main(solve_args(tmp_path / "out"))
+    assert_one_line_error(capsys, code, "out: cannot write outputs there (Permission denied)")
+    assert not (tmp_path / "out").exists()
+
+
 def test_bad_points_file(tmp_path, capsys):
     points = tmp_path / "points.txt"
     for text, part in [("1 2 3\n", "points.txt:1: expected 6 finite numbers"),

@@ -62,8 +62,14 @@ def staged_outputs(folder: str | Path):
     if folder.exists() and not folder.is_dir():
         raise NotADirectoryError(errno.ENOTDIR, "exists and is not a folder; give -o a folder", str(folder))
     created = not folder.exists()
-    folder.mkdir(parents=True, exist_ok=True)
-    stage = Path(tempfile.mkdtemp(dir=folder, prefix=STAGING_PREFIX))
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        stage = Path(tempfile.mkdtemp(dir=folder, prefix=STAGING_PREFIX))
+    except OSError as exc:
+        if created:
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        raise OSError(exc.errno, f"cannot write outputs there ({exc.strerror or exc})", str(folder)) from exc
     ok = False
     try:
         yield stage
