@@ -139,6 +139,11 @@ def test_line_continuation(tmp_path):
         load_quiet(copy_room(tmp_path, bad))
 
 
+def test_comment_ending_in_backslash_continues_nothing(tmp_path):
+    text = "# exported from C:\\models\\\n" + ROOM.replace("o wall", "o wall # C:\\walls\\")
+    same_scene(load_quiet(copy_room(tmp_path, text)), reference())
+
+
 def test_texture_normal_and_negative_references(tmp_path):
     text = (ROOM.replace("f 1 2 3 4", "vt 0 0\nvn 0 0 1\nf 1/1/1 2/1/1 3//1 4/1")
             .replace("f 9 10 11 12", "f -4 -3 -2 -1"))

@@ -123,21 +123,21 @@ def _read_lines(path: Path, what: str, referenced_from: str = "", notes: list[st
     pending: list[str] = []
     start = 0
     for number, raw in enumerate(raw_lines, start=1):
-        raw = raw.rstrip("\r")
+        # Comments go first, so a comment ending in a backslash (a Windows path) continues nothing.
+        text = raw.split("#", 1)[0].rstrip()
         if not pending:
             start = number
-        if raw.endswith("\\"):
-            pending.append(raw[:-1])
+        if text.endswith("\\"):
+            pending.append(text[:-1])
             continue
-        pending.append(raw)
-        line = " ".join(pending).split("#", 1)[0].strip()
+        pending.append(text)
+        line = " ".join(pending).strip()
         pending = []
         if line:
             out.append((start, line))
-    if pending:
-        line = " ".join(pending).split("#", 1)[0].strip()
-        if line:
-            out.append((start, line))
+    line = " ".join(pending).strip()
+    if line:
+        out.append((start, line))
     return out
 
 
