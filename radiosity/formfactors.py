@@ -294,7 +294,7 @@ def _asin_ratio_m1(y):
     return value, (63.0 / 2816.0) * y5 / (1.0 - y)
 
 
-@_jit(inline="always")
+@_jit()
 def _ff_point(points, normals, polys, p, qsrc, k, w, h, wc, mode):
     """Lambert form factor from receiver ``x`` (normal ``nr``) to ``poly[:k]``; scratch w, h, wc.
 
@@ -711,13 +711,39 @@ def _quadrature_kernel(pts, nrm, wts, nq, slot, polys, j, mode, out):
             out[t] = acc / wsum if wsum > 0.0 else 0.0
 
 
+def _receiver_pieces(receiver: np.ndarray, normal: np.ndarray, source: np.ndarray) -> np.ndarray:
+    """The receiver as (t, 4, 3) quadrature pieces: itself if it is a convex quad or a triangle,
+    else its earcut triangles. A triangle's collapsed (Duffy) vertex is put on the vertex nearest
+    the source, where a touching vertex makes the integrand singular: the collapse smooths it."""
+    from .quadrature import triangulate
+
+    k = len(receiver)
+    if k == 4:
+        e = np.roll(receiver, -1, axis=0) - receiver
+        turns = np.cross(e, np.roll(e, -1, axis=0)) @ normal
+        if (turns > 0).all() or (turns < 0).all():
+            return receiver[None].copy()
+    tris = receiver[None] if k == 3 else triangulate(receiver)
+    if len(tris) == 0:
+        return np.zeros((0, 4, 3))
+    centred = source - source.mean(axis=0)
+    d = np.linalg.norm(tris[:, :, None, :] - source[None, None], axis=-1).min(axis=2)
+    del centred
+    nearest = d.argmin(axis=1)
+    order = (np.arange(3)[None, :] + nearest[:, None] + 1) % 3  # nearest vertex goes last
+    tris = np.take_along_axis(tris, order[..., None], axis=1)
+    return np.concatenate([tris, tris[:, 2:3]], axis=1)
+
+
 def polygon_to_polygon(receiver, source, *, rtol: float = 1e-6) -> float:
     """Unoccluded area-averaged form factor F(receiver -> source) between two planar polygons.
 
-    The receiver is integrated by Gauss-Legendre rules on its triangles (collapsed squares);
-    the order doubles, and each triangle is split in four, until two successive estimates
-    agree to ``rtol``. Touching and nearly touching pairs converge because the Lambert
-    integrand is smooth inside the receiver and only log-singular on its boundary.
+    The receiver is triangulated (earcut, so non-convex receivers work) and each triangle is
+    integrated by :func:`radiosity.quadrature.pair_factors`: an a-priori Gauss order for
+    well-separated pieces, otherwise a ladder of Gauss rules (order 2, 4, 8, then the piece cut
+    into 2x2, 4x4, ... at order 8) until two successive rungs agree to ``rtol``. Touching and
+    nearly touching pairs converge because Lambert's integrand is smooth inside the receiver
+    and only log-singular on its boundary.
 
     Parameters
     ----------
@@ -742,19 +768,22 @@ def polygon_to_polygon(receiver, source, *, rtol: float = 1e-6) -> float:
     >>> round(radiosity.polygon_to_polygon(lower, upper, rtol=1e-9), 9)
     0.199824896
     """
-    from .quadrature import integrate_over_polygon
+    from .quadrature import centroids_and_areas, pair_factors
 
     receiver = as_polygon(receiver, "receiver")
     source = as_polygon(source, "source")
     if not (1e-12 <= rtol < 1):
         raise ValueError(f"rtol must be in [1e-12, 1), got {rtol}")
     normal = polygon_normals(receiver[None])[0]
-    if not normal.any():
+    if not normal.any() or not polygon_normals(source[None])[0].any():
         return 0.0
-
-    def integrand(pts: np.ndarray) -> np.ndarray:
-        normals = np.broadcast_to(normal, pts.shape)
-        polys = np.broadcast_to(source, (len(pts),) + source.shape)
-        return lambert_pairs(pts, normals, polys)
-
-    return integrate_over_polygon(integrand, receiver, rtol=rtol)
+    quads = _receiver_pieces(receiver, normal, source)
+    if len(quads) == 0:
+        return 0.0
+    centroid, area = centroids_and_areas(quads)
+    if not area.sum() > 0.0:
+        return 0.0
+    t = np.arange(len(quads))
+    values = pair_factors(quads, np.broadcast_to(normal, (len(quads), 3)).copy(), centroid, area, t,
+                          np.zeros(len(quads), dtype=np.int64), rtol=rtol, sources=source[None])
+    return float((values * area).sum() / area.sum())
