@@ -172,7 +172,7 @@ def split_patch_points(quads: np.ndarray, order: int, splits: int) -> tuple[np.n
 
 # Refinement ladder of the adaptive pair quadrature: (Gauss order, splits per direction).
 # Successive rungs are compared; a pair stops at the first rung that agrees with the previous one.
-_LADDER = ((2, 1), (4, 1), (8, 1), (8, 2), (8, 4), (8, 8), (8, 16))
+_LADDER = ((2, 1), (4, 1), (8, 1), (8, 2), (8, 4), (8, 8), (8, 16), (8, 32))
 
 # A-priori rule for well-separated pairs: with rho = (distance from the receiver's centroid to the
 # source's bounding sphere) / (receiver radius) times the smaller of the two cosines between the
