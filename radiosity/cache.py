@@ -81,6 +81,7 @@ class FormFactorCache:
         path = self.path(geometry_hash, settings)
         meta = {"shape": list(F.shape), "checksum": self._checksum(F), "geometry": geometry_hash,
                 "stats": asdict(stats), "settings": asdict(settings)}
+        tmp = None
         try:
             self.folder.mkdir(parents=True, exist_ok=True)
             fd, tmp = tempfile.mkstemp(dir=self.folder, suffix=".tmp")
@@ -90,3 +91,7 @@ class FormFactorCache:
             return path
         except OSError:
             return None
+        finally:
+            # An interrupted write (Ctrl-C, full disk) leaves no stray temporary file.
+            if tmp is not None and os.path.exists(tmp):
+                os.unlink(tmp)

@@ -44,6 +44,7 @@ def _cut(scene: Scene, options: Options) -> Scene:
         size = options.patch_size_rel * scene.scale
     if not np.isfinite(size) or (scene.max_patch_size is not None and size >= scene.max_patch_size):
         return scene
+    _memory.check_cut(scene.patch_quads, size)
     return scene.resubdivided(size)
 
 
@@ -63,7 +64,7 @@ def prepare(scene: Scene, options: Options) -> Prepared:
     cut = _cut(scene, options)
     timings["patches"] = time.perf_counter() - t0
     settings = _fill_settings(options)
-    _memory.check_fill(cut.n_patches)
+    _memory.check_fill(cut.n_patches, patch_size=cut.max_patch_size)
     cache = FormFactorCache.default() if options.cache else None
     if cache is not None:
         hit = cache.load(cut.geometry_hash, settings)
@@ -117,6 +118,7 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     prepared = prepare(scene, options)
     cut = prepared.scene
     F = _without(prepared.F, _inactive(cut))
+    _memory.check_solve(F.shape[0], F.nnz, options.solver)
     t0 = time.perf_counter()
     radiosity, report = solve_system(F, cut.reflectance, cut.emission, cut.patch_area,
                                      method=options.solver, rtol=options.rtol)

@@ -149,6 +149,10 @@ def test_budget_from_environment(monkeypatch):
 def test_solve_refused_under_budget(monkeypatch):
     scene = radiosity.load_scene(DATA / "room.obj")
     monkeypatch.setenv(_memory.ENV_BUDGET, "1000")
+    # the first allocation checked (cutting the patches) is refused, with the knob to turn
+    with pytest.raises(MemoryBudgetError, match="patches .*needs up to .*max-patch-size"):
+        radiosity.solve(scene, preset="draft", cache=False)
+    monkeypatch.setenv(_memory.ENV_BUDGET, "300000")
     with pytest.raises(MemoryBudgetError, match="view-factor matrix of .* patches needs"):
         radiosity.solve(scene, preset="draft", cache=False)
 
