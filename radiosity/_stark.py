@@ -300,7 +300,6 @@ def image_plane_clipped(points: np.ndarray, normals: np.ndarray, polys: np.ndarr
     R = float(radius)
     rel = receiver_frame(points, normals, polys)
     inplane = _in_source_plane(rel)
-    k = rel.shape[1]
     clipped = rel
     for axis, sgn in ((0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0)):
         clipped = _clip(clipped, R * clipped[..., 2] - sgn * clipped[..., axis])
@@ -311,7 +310,6 @@ def image_plane_clipped(points: np.ndarray, normals: np.ndarray, polys: np.ndarr
     out = np.clip(np.where(ok, np.abs(s) / _TWO_PI, 0.0), 0.0, 1.0)
     inside = ((np.abs(rel[..., 0]) <= R * rel[..., 2]) & (np.abs(rel[..., 1]) <= R * rel[..., 2])).all(axis=1)
     bound = np.where(inside | inplane, 0.0, float(clip_error_bound(R)))
-    del k
     return out, bound
 
 
