@@ -54,3 +54,8 @@ KERNEL_BLOCK = 4096
 # Adaptive patch-pair quadrature: a pair is accepted when two successive estimates agree to
 # rtol·F, or to this absolute floor (form factors below it are dropped from F anyway).
 PAIR_ATOL = 1e-14
+
+# Most receiver points the fill spends on one pair (a 64 x 64 Gauss grid). Pairs that touch
+# along an edge converge slowly; past this the estimate is kept (error ~1e-6 of the factor on
+# the Cornell box), so the cost of a fill stays proportional to its pairs.
+PAIR_MAX_POINTS = 4096

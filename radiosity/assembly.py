@@ -16,7 +16,7 @@ import scipy.sparse as sp
 
 from . import _tol
 from .formfactors import lambert_pairs
-from .quadrature import patch_points
+from .quadrature import pair_factors, patch_points
 
 __all__ = ["FillSettings", "FillStats", "candidate_pairs", "unoccluded_factors", "assemble"]
 
@@ -31,7 +31,7 @@ class FillSettings:
     Attributes
     ----------
     near_order : int, default: 3
-        Gauss points per direction on the receiver for near pairs.
+        Gauss points per direction on the receiver for exact shadow clipping of near pairs.
     far_separation : float, default: 3.0
         Relative separation beyond which one centroid point is used.
     visibility_samples : int, default: 2
@@ -46,6 +46,10 @@ class FillSettings:
         ``"auto"`` computes a partly occluded pair exactly when rays would likely miss it by
         more than this: when ``F_unoccluded / visibility_max_samples > visibility_rtol``. It is
         an absolute error per view factor, i.e. relative to a closed enclosure's row sum of 1.
+    formfactor_rtol : float, default: 1e-6
+        Relative accuracy of each unoccluded factor (:func:`radiosity.quadrature.pair_factors`
+        picks the rule per pair: a-priori Gauss orders for separated pairs, a verified
+        refinement ladder for near and touching ones).
     """
 
     near_order: int = 3
@@ -54,6 +58,7 @@ class FillSettings:
     visibility: str = "auto"
     visibility_max_samples: int = 4
     visibility_rtol: float = 1e-4
+    formfactor_rtol: float = 1e-6
 
     def __post_init__(self):
         if self.visibility not in VISIBILITY_MODES:
@@ -109,19 +114,9 @@ def _is_near(quads, centroid, i, j, settings: FillSettings) -> np.ndarray:
 
 def unoccluded_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, area: np.ndarray,
                        i: np.ndarray, j: np.ndarray, settings: FillSettings) -> np.ndarray:
-    """F(i -> j) without occlusion, by Gauss quadrature over i of Lambert's formula to j."""
-    near = _is_near(quads, centroid, i, j, settings)
-    out = np.empty(len(i))
-    far = ~near
-    out[far] = lambert_pairs(centroid[i[far]], normals[i[far]], quads[j[far]])
-    if near.any():
-        pts, w = patch_points(quads, settings.near_order)
-        q = pts.shape[1]
-        ni, nj = i[near], j[near]
-        values = lambert_pairs(pts[ni].reshape(-1, 3), np.repeat(normals[ni], q, axis=0),
-                               np.repeat(quads[nj], q, axis=0)).reshape(-1, q)
-        out[near] = (values * w[ni]).sum(axis=1) / area[ni]
-    return out
+    """F(i -> j) without occlusion, each pair to ``settings.formfactor_rtol`` (relative)."""
+    return pair_factors(quads, normals, centroid, area, i, j, rtol=settings.formfactor_rtol,
+                        max_points=_tol.PAIR_MAX_POINTS)
 
 
 def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettings, stats: FillStats) -> None:

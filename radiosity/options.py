@@ -34,6 +34,8 @@ class Options:
         Points per direction on each patch for pairs whose first-round rays disagree.
     visibility_rtol : float
         Absolute error per view factor that ``"auto"`` accepts from rays.
+    formfactor_rtol : float
+        Relative accuracy of each unoccluded form factor (adaptive quadrature per pair).
     solver : {"auto", "direct", "bicgstab", "gmres", "jacobi", "gauss-seidel", "progressive"}
     rtol : float
         Relative residual at which iterative solvers stop.
@@ -49,6 +51,7 @@ class Options:
     visibility: str = "auto"
     visibility_max_samples: int = 4
     visibility_rtol: float = 1e-4
+    formfactor_rtol: float = 1e-4
     solver: str = "auto"
     rtol: float = 1e-10
     cache: bool = True
@@ -65,8 +68,8 @@ class Options:
 
 PRESETS = {
     "draft": Options(patch_size_rel=1 / 12, near_order=2, far_separation=2.0, visibility_samples=2,
-                     visibility="rays", visibility_max_samples=3, visibility_rtol=1e-3),
+                     visibility="rays", visibility_max_samples=3, visibility_rtol=1e-3, formfactor_rtol=1e-3),
     "default": Options(),
     "fine": Options(patch_size_rel=1 / 50, near_order=4, far_separation=4.0, visibility_samples=3,
-                    visibility_max_samples=5, visibility_rtol=1e-5),
+                    visibility_max_samples=5, visibility_rtol=1e-5, formfactor_rtol=1e-6),
 }

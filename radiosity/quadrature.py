@@ -172,7 +172,7 @@ def split_patch_points(quads: np.ndarray, order: int, splits: int) -> tuple[np.n
 
 # Refinement ladder of the adaptive pair quadrature: (Gauss order, splits per direction).
 # Successive rungs are compared; a pair stops at the first rung that agrees with the previous one.
-_LADDER = ((2, 1), (4, 1), (8, 1), (8, 2), (8, 4), (8, 8), (8, 16), (8, 32))
+_LADDER = ((4, 1), (8, 1), (8, 2), (8, 4), (8, 8), (8, 16), (8, 32))  # (2, 1) vs (4, 1) agree by chance on touching pairs
 
 # A-priori rule for well-separated pairs: with rho = (distance from the receiver's centroid to the
 # source's bounding sphere) / (receiver radius) times the smaller of the two cosines between the
@@ -224,6 +224,37 @@ def _evaluate(rquads, rnormals, sources, i, j, order, splits, mode):
     return (vals * w[slot]).sum(axis=1) / w[slot].sum(axis=1)  # pragma: no cover
 
 
+def _clipped_receivers(quads, normals, srcs, i, j, height, *, rtol, max_points):
+    """F(i -> j) for receivers straddling the source's plane: only their front part counts.
+
+    Each receiver is clipped to height >= 0 above the source's plane (up to 5 vertices),
+    fanned into triangles, and each triangle is integrated as a receiver of its own; the
+    results are combined by area.
+    """
+    from .formfactors import _clip_to_upper
+
+    slots = _clip_to_upper(quads[i], height)  # (m, 8, 3), removed slots repeat a kept vertex
+    k = slots.shape[1]
+    a = np.repeat(slots[:, :1], k - 2, axis=1)
+    tris = np.stack([a, slots[:, 1:-1], slots[:, 2:]], axis=2)  # (m, k-2, 3, 3)
+    tri_area = 0.5 * np.linalg.norm(np.cross(tris[..., 1, :] - tris[..., 0, :], tris[..., 2, :] - tris[..., 0, :]), axis=-1)
+    _, rec_area = centroids_and_areas(quads[i])
+    keep = tri_area > 1e-14 * rec_area[:, None]
+    pair, piece = np.nonzero(keep)
+    pieces = tris[pair, piece]
+    pieces = np.concatenate([pieces, pieces[:, 2:3]], axis=1)
+    p_cen, p_area = centroids_and_areas(pieces)
+    f, info = pair_factors(pieces, normals[i[pair]], p_cen, p_area, np.arange(len(pair)), j[pair], rtol=rtol,
+                           sources=srcs, return_info=True, max_points=max_points, _clipped=True)
+    out = np.zeros(len(i))
+    np.add.at(out, pair, f * p_area)
+    used = np.zeros(len(i), dtype=np.int64)
+    np.add.at(used, pair, info["points"])
+    converged = np.ones(len(i), dtype=bool)
+    np.logical_and.at(converged, pair, info["converged"])
+    return out / np.where(rec_area > 0, rec_area, 1.0), used, converged
+
+
 def _src_normals(polys: np.ndarray) -> np.ndarray:
     from .formfactors import polygon_normals
 
@@ -231,7 +262,7 @@ def _src_normals(polys: np.ndarray) -> np.ndarray:
 
 
 def pair_factors(quads, normals, centroid, area, i, j, *, rtol: float = 1e-6, sources=None,
-                 return_info: bool = False):
+                 return_info: bool = False, max_points: int | None = None, _clipped: bool = False):
     """Unoccluded F(i -> j) for many patch pairs, each to a relative tolerance.
 
     F(i -> j) = (1/A_i) ∫_{A_i} F_pt(x -> P_j) dA, with Lambert's closed form for the inner
@@ -265,6 +296,10 @@ def pair_factors(quads, normals, centroid, area, i, j, *, rtol: float = 1e-6, so
         Source polygons indexed by ``j`` when they differ from ``quads``.
     return_info : bool, default: False
         Also return a dict with the rung each pair stopped at and whether it converged.
+    max_points : int, optional
+        Most receiver points one pair may use (the ladder stops there, unconverged). Touching
+        pairs converge slowly (the integrand is log-singular along the shared edge), so this
+        bounds the fill's cost; None climbs the whole ladder.
 
     Returns
     -------
@@ -315,10 +350,17 @@ def pair_factors(quads, normals, centroid, area, i, j, *, rtol: float = 1e-6, so
     cos_min = np.minimum(np.abs(np.einsum("mc,mc->m", normals[i], u)),
                          np.abs(np.einsum("mc,mc->m", s_nrm[j], u)))
     rho = rho * cos_min
-    # The receiver crossing the source's plane puts a kink in the integrand: ladder only.
+    # A receiver crossing the source's plane sees the source's back from part of its area,
+    # which gives nothing (surfaces are one-sided), and the integrand has a kink there: clip
+    # the receiver to the source's front half-space and integrate the pieces.
     h = np.einsum("mkc,mc->mk", quads[i] - s_cen[j][:, None, :], s_nrm[j])
     tol_h = 1e-12 * (r_rec[i] + r_src[j])
     crossing = (h.max(axis=1) > tol_h) & (h.min(axis=1) < -tol_h)
+    clipped_here = crossing if not _clipped else np.zeros(m, dtype=bool)
+    if clipped_here.any():
+        sel = np.flatnonzero(clipped_here)
+        out[sel], used[sel], converged[sel] = _clipped_receivers(
+            quads, normals, srcs, i[sel], j[sel], h[sel], rtol=rtol, max_points=max_points)
     # A-priori orders for separated pairs.
     order = np.zeros(m, dtype=np.int64)
     ok_rho = (rho > 1.5) & ~crossing
@@ -328,6 +370,7 @@ def pair_factors(quads, normals, centroid, area, i, j, *, rtol: float = 1e-6, so
     if sources is None:
         touch = _touching(quads, srcs, i, j, r_rec[i] + r_src[j])
         order[touch] = 0
+    order[clipped_here] = -1  # already integrated piecewise
     for p in np.unique(order[order > 0]):
         sel = np.flatnonzero(order == p)
         out[sel] = _evaluate(quads, normals, srcs, i[sel], j[sel], int(p), 1, "auto")
@@ -336,7 +379,7 @@ def pair_factors(quads, normals, centroid, area, i, j, *, rtol: float = 1e-6, so
     pending = np.flatnonzero(order == 0)
     previous = None
     for order_l, splits in _LADDER:
-        if not len(pending):
+        if not len(pending) or (max_points is not None and (order_l * splits) ** 2 > max_points):
             break
         est = _evaluate(quads, normals, srcs, i[pending], j[pending], order_l, splits, "auto")
         out[pending] = est
