@@ -8,7 +8,7 @@ For each preset (draft, default, fine) this measures, in one run on this machine
   the closed unit cube cut 4 x 4 per face (worst row-sum error);
 * the bundled Cornell box: patches, time, and worst per-object, per-channel relative
   deviation of ``object_radiosity()`` from a reference solved much finer
-  (bench/results/cornell_reference.json if present, else computed here and saved).
+  (bench/results/accuracy_reference.json if present, else computed here and saved).
 
 Run ``python bench/accuracy_vs_time.py [--quick]``; it writes
 bench/results/accuracy_vs_time.json and regenerates the table in docs/accuracy.md.
@@ -33,7 +33,7 @@ import radiosity  # noqa: E402
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "accuracy.md"
 PRESETS = ("draft", "default", "fine")
-REFERENCE_PATCH_SIZE = 0.012
+REFERENCE_PATCH_SIZE = 0.02
 
 
 def square(z: float, down: bool) -> np.ndarray:
@@ -91,7 +91,7 @@ def measure_view_factors(preset: str, n: int, folder: Path) -> list[dict]:
 
 
 def cornell_reference(quick: bool) -> dict:
-    path = RESULTS / "cornell_reference.json"
+    path = RESULTS / "accuracy_reference.json"
     if path.exists():
         data = json.loads(path.read_text())
         return {k: np.array(v) for k, v in data["objects"].items()}
@@ -149,7 +149,7 @@ def main(argv=None) -> int:
         print(f"cornell {r['preset']:<8} {r['patches']:6d} patches {r['seconds']:7.2f} s  "
               f"worst object {100 * r['worst_object_error']:.2f}% ({r['worst_object']})")
     note = ("Reference: the same scene solved with the `fine` preset at max_patch_size "
-            f"{REFERENCE_PATCH_SIZE} m (bench/results/cornell_reference.json); error = worst per-object, "
+            f"{REFERENCE_PATCH_SIZE} m (bench/results/accuracy_reference.json); error = worst per-object, "
             "per-channel relative deviation of the area-weighted mean radiosity (light excluded).")
     path = write_json("accuracy_vs_time", {"view_factors": vf_rows, "cornell": cornell_rows, "n": n}, args.out)
     if not args.quick:

@@ -639,30 +639,10 @@ def _lambert_indexed_kernel(points, normals, polys, pi, qi, mode, out):
                 out[t] = _ff_point(points, normals, polys, pi[t], qi[t], k, w, h, wc, mode)
 
 
-@_jit(parallel=True)
 def _lambert_rows_kernel(points, normals, polys, mode, out):
-    """out[p] = F(points[p] -> polys[p]); same paths as ``_lambert_indexed_kernel``."""
-    m = points.shape[0]
-    rows = np.arange(m)
-    k = polys.shape[1]
-    nblocks = (m + _BLOCK - 1) // _BLOCK
-    for b in _prange(nblocks):
-        w = np.empty((k, 3))
-        h = np.empty(k)
-        wc = np.empty((2 * k, 3))
-        S, D, XN, PP, D2, TH, BASE, FLAGS = _scratch(_BLOCK)
-        lo = b * _BLOCK
-        hi = min(m, lo + _BLOCK)
-        if k == 4 and mode == 0:
-            special = np.empty(hi - lo, dtype=np.bool_)
-            _quads_phased(points, normals, polys, rows, rows, lo, hi, out, special, S, D, XN, PP, D2, TH,
-                          BASE, FLAGS)
-            for t in range(lo, hi):
-                if special[t - lo]:
-                    out[t] = _ff_point(points, normals, polys, t, t, k, w, h, wc, mode)
-        else:
-            for t in range(lo, hi):
-                out[t] = _ff_point(points, normals, polys, t, t, k, w, h, wc, mode)
+    """out[p] = F(points[p] -> polys[p]): the indexed kernel with the identity pairing."""
+    rows = np.arange(points.shape[0], dtype=np.int64)
+    _lambert_indexed_kernel(points, normals, polys, rows, rows, mode, out)
 
 
 @_jit(parallel=True)

@@ -42,17 +42,7 @@ def patch_points(quads: np.ndarray, order: int) -> tuple[np.ndarray, np.ndarray]
     if order == 1:
         centroid, area = centroids_and_areas(quads)
         return centroid[:, None, :], area[:, None]
-    nodes, w = gauss_legendre_01(order)
-    u = np.repeat(nodes, order)
-    v = np.tile(nodes, order)
-    wuv = np.repeat(w, order) * np.tile(w, order)
-    a, b, c, d = (quads[:, i, None, :] for i in range(4))
-    uu, vv = u[None, :, None], v[None, :, None]
-    points = (1 - uu) * (1 - vv) * a + uu * (1 - vv) * b + uu * vv * c + (1 - uu) * vv * d
-    du = (1 - vv) * (b - a) + vv * (c - d)
-    dv = (1 - uu) * (d - a) + uu * (c - b)
-    jac = np.linalg.norm(np.cross(du, dv), axis=-1)
-    return points, jac * wuv[None, :]
+    return split_patch_points(quads, order, 1)
 
 
 def centroids_and_areas(quads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
