@@ -63,7 +63,7 @@ def total_factor(scene, F, a: str, b: str) -> float:
 
 def canonical_cases(folder: Path, n: int) -> dict:
     blocker = np.array([[0.25, 0.25, 0.5], [0.75, 0.25, 0.5], [0.75, 0.75, 0.5], [0.25, 0.75, 0.5]])
-    wall = np.array([[0, 0, 0], [0, 0, 1], [0, 1, 1], [0, 1, 0]], float)
+    wall = np.array([[0, 0, 0], [0, 1, 0], [0, 1, 1], [0, 0, 1]], float)  # x = 0, facing +x
     return {
         "parallel squares 1 apart": (write_obj(folder / "par.obj", {"a": [square(0, False)], "b": [square(1, True)]}),
                                      0.1998248957),

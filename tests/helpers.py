@@ -18,7 +18,7 @@ def square_at(z: float, *, facing_down: bool = True) -> np.ndarray:
 PARALLEL_SQUARES = {1.0: 0.1998248957, 0.1: 0.8269945224, 10.0: 0.0031620568}
 # Perpendicular unit squares sharing an edge (Howell C-14).
 PERPENDICULAR_SQUARES = 0.2000437761
-WALL_X0 = np.array([[0, 0, 0], [0, 0, 1], [0, 1, 1], [0, 1, 0]], dtype=float)  # x = 0, normal +x
+WALL_X0 = np.array([[0, 0, 0], [0, 0, 1], [0, 1, 1], [0, 1, 0]], dtype=float)  # x = 0, normal -x (reverse it to face +x)
 # Parallel squares 1 apart with a centred 0.5 x 0.5 blocker midway.
 BLOCKED_PARALLEL_SQUARES = 0.0995062946
 # Coaxial disks, radius = distance: (3 - sqrt 5) / 2.
