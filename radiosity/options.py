@@ -70,6 +70,6 @@ PRESETS = {
     "draft": Options(patch_size_rel=1 / 12, near_order=2, far_separation=2.0, visibility_samples=2,
                      visibility="rays", visibility_max_samples=3, visibility_rtol=1e-3, formfactor_rtol=1e-3),
     "default": Options(),
-    "fine": Options(patch_size_rel=1 / 50, near_order=4, far_separation=4.0, visibility_samples=3,
+    "fine": Options(patch_size_rel=1 / 35, near_order=4, far_separation=4.0, visibility_samples=3,
                     visibility_max_samples=5, visibility_rtol=1e-5, formfactor_rtol=1e-6),
 }

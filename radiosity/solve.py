@@ -164,8 +164,9 @@ def view_factors(scene: Scene, *, preset: str = "default", enforce: str = "none"
         scales them symmetrically so rows sum to 1 (closed enclosures only). See
         :mod:`radiosity.enclosure`.
     **overrides
-        Fields of :class:`radiosity.options.Options`; ``formfactor_rtol`` defaults to 1e-6
-        here (each unoccluded factor to six digits), tighter than :func:`solve` needs.
+        Fields of :class:`radiosity.options.Options`; ``formfactor_rtol`` and
+        ``visibility_rtol`` default to 1e-6 here (each factor to about six digits, partly
+        occluded pairs by exact shadow clipping), tighter than :func:`solve` needs.
 
     Examples
     --------
@@ -179,9 +180,12 @@ def view_factors(scene: Scene, *, preset: str = "default", enforce: str = "none"
 
     if enforce not in ("none", "reciprocity", "closure"):
         raise TypeError(f"unknown enforce {enforce!r}; valid: none, reciprocity, closure")
-    # The matrix is the product here: each unoccluded factor to 1e-6 (or tighter) unless asked.
-    overrides = {"formfactor_rtol": min(1e-6, PRESETS[preset].formfactor_rtol) if preset in PRESETS else 1e-6,
-                 **overrides}
+    # The matrix is the product here: each factor to 1e-6 (or tighter) unless asked; partly
+    # occluded pairs then take exact shadow clipping ("auto" with visibility_rtol 1e-6).
+    tight = {"formfactor_rtol": 1e-6, "visibility_rtol": 1e-6}
+    if preset in PRESETS:
+        tight = {k: min(v, getattr(PRESETS[preset], k)) for k, v in tight.items()}
+    overrides = {**tight, **overrides}
     options = Options.from_preset(preset, **overrides)
     if options.max_patch_size is None:
         options = Options.from_preset(preset, **{**overrides, "patch_size_rel": np.inf})
