@@ -58,11 +58,23 @@ def scene_camera(source: str):
     return None
 
 
+def _quiet_vtk() -> None:
+    """Keep VTK's warnings off stderr: without a display it logs 'bad X server connection'
+    before falling back to off-screen (EGL) rendering, which works; real errors still show."""
+    try:
+        from vtkmodules.vtkCommonCore import vtkLogger
+
+        vtkLogger.SetStderrVerbosity(vtkLogger.VERBOSITY_ERROR)
+    except ImportError:  # pragma: no cover - older VTK
+        pass
+
+
 def render(solution, path: str | Path | None = None, *, window_size=(800, 800), exposure: float | None = None,
            off_screen: bool = True):
     """Render the solution (radiance B/pi, tone-mapped to sRGB) and save a PNG if ``path``."""
     import pyvista as pv
 
+    _quiet_vtk()
     mesh = to_polydata(solution)
     exposure = auto_exposure(solution) if exposure is None else exposure
     mesh.point_data["rgb"] = tone_map(mesh.point_data["radiosity"] / np.pi, exposure)
