@@ -431,6 +431,11 @@ def _emit_part(part: _Part, regions, emit, tol: float) -> None:
     from shapely.ops import polygonize
 
     shape = _polygon(part.to_2d(part.poly))
+    if shape.geom_type != "Polygon":
+        # A self-touching or self-intersecting face is not a simple polygon: leave it uncut
+        # (subdivision triangulates it as it stands) rather than imprint a guess.
+        emit(part.poly, part.face, False)
+        return
     minimum = SLIVER_AREA_REL * shape.area
     clipped = [(region.intersection(shape), hidden) for region, hidden, _, _ in regions]
     clipped = [(r, h) for r, h in clipped if not r.is_empty and r.area > minimum]

@@ -198,8 +198,6 @@ def test_tiny_faces_with_coincident_vertices():
     assert (scene.patch_area > 0).all()
 
 
-@pytest.mark.xfail(reason="imprint.py raises AttributeError on self-touching faces of two objects "
-                          "(GeometryCollection from make_valid); reported, not the loader's code", strict=False)
 def test_self_touching_faces_give_scene_error_or_load():
     try:
         scene = load_quiet(DATA / "self_touching_faces.obj")
