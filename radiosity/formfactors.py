@@ -294,6 +294,25 @@ def _asin_ratio_m1(y):
     return value, (63.0 / 2816.0) * y5 / (1.0 - y)
 
 
+@_jit(inline="always")
+def _radius2_area(verts, count):
+    """Largest squared distance of the first ``count`` vertices from the origin (the first
+    vertex), and twice the polygon's vector area (Newell), for the scalar path."""
+    r2max = 0.0
+    A0 = 0.0
+    A1 = 0.0
+    A2 = 0.0
+    for i in range(count):
+        r2 = verts[i, 0] * verts[i, 0] + verts[i, 1] * verts[i, 1] + verts[i, 2] * verts[i, 2]
+        if r2 > r2max:
+            r2max = r2
+        j = i + 1 if i + 1 < count else 0
+        A0 += verts[i, 1] * verts[j, 2] - verts[i, 2] * verts[j, 1]
+        A1 += verts[i, 2] * verts[j, 0] - verts[i, 0] * verts[j, 2]
+        A2 += verts[i, 0] * verts[j, 1] - verts[i, 1] * verts[j, 0]
+    return r2max, A0, A1, A2
+
+
 @_jit()
 def _ff_point(points, normals, polys, p, qsrc, k, w, h, wc, mode):
     """Lambert form factor from receiver ``x`` (normal ``nr``) to ``poly[:k]``; scratch w, h, wc.
@@ -305,23 +324,12 @@ def _ff_point(points, normals, polys, p, qsrc, k, w, h, wc, mode):
     o0, o1, o2 = polys[qsrc, 0, 0], polys[qsrc, 0, 1], polys[qsrc, 0, 2]
     c0, c1, c2 = o0 - points[p, 0], o1 - points[p, 1], o2 - points[p, 2]
     n0, n1, n2 = normals[p, 0], normals[p, 1], normals[p, 2]
-    r2max = 0.0
     for i in range(k):
         w[i, 0] = polys[qsrc, i, 0] - o0
         w[i, 1] = polys[qsrc, i, 1] - o1
         w[i, 2] = polys[qsrc, i, 2] - o2
-        r2 = w[i, 0] * w[i, 0] + w[i, 1] * w[i, 1] + w[i, 2] * w[i, 2]
-        if r2 > r2max:
-            r2max = r2
     # Twice the vector area (Newell), origin free.
-    A0 = 0.0
-    A1 = 0.0
-    A2 = 0.0
-    for i in range(k):
-        j = i + 1 if i + 1 < k else 0
-        A0 += w[i, 1] * w[j, 2] - w[i, 2] * w[j, 1]
-        A1 += w[i, 2] * w[j, 0] - w[i, 0] * w[j, 2]
-        A2 += w[i, 0] * w[j, 1] - w[i, 1] * w[j, 0]
+    r2max, A0, A1, A2 = _radius2_area(w, k)
     alen = np.sqrt(A0 * A0 + A1 * A1 + A2 * A2)
     if not (alen > _DEG * r2max) or r2max == 0.0:
         return 0.0  # degenerate polygon
@@ -366,19 +374,7 @@ def _ff_point(points, normals, polys, p, qsrc, k, w, h, wc, mode):
                 wc[kc, 2] = w[i, 2] + t * (w[j, 2] - w[i, 2])
                 kc += 1
         verts = wc
-        r2max = 0.0
-        for i in range(kc):
-            r2 = verts[i, 0] * verts[i, 0] + verts[i, 1] * verts[i, 1] + verts[i, 2] * verts[i, 2]
-            if r2 > r2max:
-                r2max = r2
-        A0 = 0.0
-        A1 = 0.0
-        A2 = 0.0
-        for i in range(kc):
-            j = i + 1 if i + 1 < kc else 0
-            A0 += verts[i, 1] * verts[j, 2] - verts[i, 2] * verts[j, 1]
-            A1 += verts[i, 2] * verts[j, 0] - verts[i, 0] * verts[j, 2]
-            A2 += verts[i, 0] * verts[j, 1] - verts[i, 1] * verts[j, 0]
+        r2max, A0, A1, A2 = _radius2_area(verts, kc)
     else:
         kc = k
         verts = w
