@@ -135,7 +135,10 @@ def main(argv=None) -> int:
     for imprint in (True, False):
         for preset in presets:
             if raw is not None:
-                case = next(c for c in raw if c["preset"] == preset and c["imprint"] == imprint)
+                case = next((c for c in raw if c["preset"] == preset and c["imprint"] == imprint), None)
+                if case is None:
+                    print(f"{preset:8s} imprint={str(imprint):5s} not in {args.cases}: skipped")
+                    continue
             else:
                 case = solve_case(preset, imprint)
             case = compare(case, ref)
