@@ -44,10 +44,6 @@ FAR_FIELD_RATIO = 2.0
 # rounding of theta/sin(theta) - 1 formed from atan2, so the series is also the more accurate.
 FAR_SERIES_SINE = 0.03
 
-# The series path is kept only where its error estimate (sum of the per-edge remainders) is below
-# this fraction of the form factor; otherwise the pair is recomputed with atan2 on every edge.
-FAR_SERIES_RTOL = 1e-13
-
 # Receiver-triangle pairs handed to one parallel task of the numba kernels.
 KERNEL_BLOCK = 4096
 
