@@ -1,4 +1,5 @@
-"""Form-factor kernels: Lambert pairs/s (numba on 1 and 2 threads vs plain numpy, same run),
+"""Form-factor kernels: Lambert pairs/s (numba on 1 and 2 threads vs plain numpy, same run;
+independent pairs and the receivers x triangles pattern of a matrix fill),
 far-field accuracy, polygon_to_polygon time vs rtol, closed-cube row sums with pair_factors.
 
     python bench/bench_formfactors.py [--quick]
@@ -67,7 +68,7 @@ def main(argv=None):
     args = parse_args(__doc__.splitlines()[0], argv)
     import numba
 
-    from radiosity import polygon_to_polygon
+    from radiosity import point_to_polygons, polygon_to_polygon
     from radiosity.formfactors import _lambert_numpy, lambert_pairs
     from radiosity.quadrature import centroids_and_areas, pair_factors
 
@@ -75,18 +76,27 @@ def main(argv=None):
     m = 200_000 if args.quick else 2_000_000
     repeat = 2 if args.quick else 3
     pts, nrm, polys = pairs_case(m, rng)
+    # the fill's pattern: many receivers against each triangle (point_to_polygons)
+    mr, nt = (512, 400) if args.quick else (2048, 1000)
+    rpts, rnrm, _ = pairs_case(mr, rng)
+    tris = pairs_case(nt, rng)[2][:, :3].copy()
     lambert_pairs(pts[:10], nrm[:10], polys[:10])  # compile / load cache
+    point_to_polygons(rpts[:3], rnrm[:3], tris[:2])
     rows = []
     mn = min(m, 200_000)
-    wall, cpu = rate(lambda: _lambert_numpy(pts[:mn], nrm[:mn], polys[:mn]), mn, repeat)
-    rows.append({"kernel": "numpy (raw sum)", "threads": 1, "Mpairs/s wall": wall, "Mpairs/cpu-s": cpu})
+    base_wall, base_cpu = rate(lambda: _lambert_numpy(pts[:mn], nrm[:mn], polys[:mn]), mn, repeat)
+    rows.append({"kernel": "numpy (raw sum), independent pairs", "threads": 1, "Mpairs/s wall": base_wall,
+                 "Mpairs/cpu-s": base_cpu, "x numpy (cpu)": 1.0})
     for threads in (1, 2):
         numba.set_num_threads(threads)
-        for mode in ("auto", "raw"):
-            wall, cpu = rate(lambda: lambert_pairs(pts, nrm, polys, mode=mode), m, repeat)
-            rows.append({"kernel": f"numba {mode}", "threads": threads, "Mpairs/s wall": wall,
-                         "Mpairs/cpu-s": cpu})
-    print_table(rows, title=f"Lambert receiver-triangle pairs ({m} pairs)")
+        cases = {"numba, independent pairs": (lambda: lambert_pairs(pts, nrm, polys), m),
+                 "numba, receivers x triangles": (lambda: point_to_polygons(rpts, rnrm, tris), mr * nt)}
+        for name, (fn, count) in cases.items():
+            wall, cpu = rate(fn, count, repeat)
+            rows.append({"kernel": name, "threads": threads, "Mpairs/s wall": wall, "Mpairs/cpu-s": cpu,
+                         "x numpy (cpu)": cpu / base_cpu})
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    print_table(rows, title=f"Lambert receiver-triangle pairs ({m:,} independent pairs; {mr:,} x {nt:,} matrix)")
 
     # polygon_to_polygon time and error vs rtol
     lower = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)

@@ -3,6 +3,7 @@
 Public API
 ----------
 point_to_polygon    -- form factor from differential receivers to a polygon (Lambert)
+point_to_polygons   -- the same against many polygons at once: an (m, n) matrix
 polygon_to_polygon  -- area-averaged form factor between two polygons, to a tolerance
 load_scene          -- OBJ + MTL scene cut into patches (Scene)
 bundled_scene       -- path of a scene shipped with the package ("cornell_box", ...)
@@ -13,7 +14,7 @@ RadiosityError, SceneError, MemoryBudgetError, RadiosityWarning
 """
 
 from ._errors import MemoryBudgetError, RadiosityError, RadiosityWarning, SceneError
-from .formfactors import point_to_polygon, polygon_to_polygon
+from .formfactors import point_to_polygon, point_to_polygons, polygon_to_polygon
 from .options import PRESETS, Options
 from .scene import Scene, bundled_scene, load_scene
 from .solution import Solution
@@ -21,6 +22,7 @@ from .solve import solve, view_factors
 
 __all__ = [
     "point_to_polygon",
+    "point_to_polygons",
     "polygon_to_polygon",
     "load_scene",
     "bundled_scene",

@@ -347,7 +347,9 @@ def _gather(points, normals, polys, pidx, qidx, lo, n, k, sc):
 
 @_vjit()
 def _block_setup(n, k, sc, far_ratio):
-    """Per lane: area vector, radius, |c|, the far flag and the kappa (A . n) term."""
+    """Per lane: area vector, radius, |c|, the far flag and the kappa (A . n) term.
+
+    Returns the number of far lanes."""
     c0, c1, c2, n0, n1, n2 = sc[_ROW_C], sc[_ROW_C + 1], sc[_ROW_C + 2], sc[_ROW_N], sc[_ROW_N + 1], sc[_ROW_N + 2]
     A0, A1, A2, r2 = sc[_ROW_A], sc[_ROW_A + 1], sc[_ROW_A + 2], sc[_ROW_R2]
     for u in range(n):
@@ -366,6 +368,7 @@ def _block_setup(n, k, sc, far_ratio):
             r2[u] = _fmax(r2[u], wi0[u] * wi0[u] + wi1[u] * wi1[u] + wi2[u] * wi2[u])
     far2 = far_ratio * far_ratio
     total, C2, gamma, far = sc[_ROW_TOTAL], sc[_ROW_C2], sc[_ROW_GAMMA], sc[_ROW_FAR]
+    count = 0
     for u in range(n):
         cc = c0[u] * c0[u] + c1[u] * c1[u] + c2[u] * c2[u]
         C2[u] = cc
@@ -373,41 +376,50 @@ def _block_setup(n, k, sc, far_ratio):
         is_far = cc > far2 * r2[u] and far2 > 0.0
         far[u] = 1.0 if is_far else 0.0
         total[u] = (A0[u] * n0[u] + A1[u] * n1[u] + A2[u] * n2[u]) / cc if is_far else 0.0
+        count += 1 if is_far else 0
+    return count
 
 
 @_vjit()
-def _block_vertices(n, k, sc):
-    """Per lane and vertex: |a_i|^2, |a_i|, rho_i (1/|a_i| near; 1/|a_i| - 1/|c| far, formed
-    without cancellation), and the heights and distances the flags need."""
+def _block_vertices(n, k, sc, any_far):
+    """Per lane and vertex: |a_i|^2, and where a lane is far |a_i| and rho_i = 1/|a_i| - 1/|c|
+    (formed without cancellation); the heights and distances the flags need."""
     c0, c1, c2, n0, n1, n2 = sc[_ROW_C], sc[_ROW_C + 1], sc[_ROW_C + 2], sc[_ROW_N], sc[_ROW_N + 1], sc[_ROW_N + 2]
     C2, gamma, far = sc[_ROW_C2], sc[_ROW_GAMMA], sc[_ROW_FAR]
     hmin, hmax, d2max = sc[_ROW_HMIN], sc[_ROW_HMAX], sc[_ROW_D2MAX]
-    for u in range(n):
+    la, ra, rho = sc[_ROW_W + 3 * k], sc[_ROW_W + 4 * k], sc[_ROW_W + 5 * k]
+    for u in range(n):  # vertex 0 is o itself: a_0 = c
         h = c0[u] * n0[u] + c1[u] * n1[u] + c2[u] * n2[u]
         hmin[u] = h
         hmax[u] = h
         d2max[u] = C2[u]
-    for i in range(k):
+        la[u] = C2[u]
+        ra[u] = C2[u] * gamma[u]
+        rho[u] = 0.0
+    for i in range(1, k):
         w0, w1, w2 = sc[_ROW_W + 3 * i], sc[_ROW_W + 3 * i + 1], sc[_ROW_W + 3 * i + 2]
         la, ra, rho = sc[_ROW_W + 3 * k + i], sc[_ROW_W + 4 * k + i], sc[_ROW_W + 5 * k + i]
         for u in range(n):
             ali = 2.0 * (c0[u] * w0[u] + c1[u] * w1[u] + c2[u] * w2[u]) \
                 + (w0[u] * w0[u] + w1[u] * w1[u] + w2[u] * w2[u])
             lsq = C2[u] + ali
-            r = np.sqrt(lsq)
             la[u] = lsq
-            ra[u] = r
-            c = C2[u] * gamma[u]
-            is_far = far[u] > 0.0
-            rho[u] = (-ali if is_far else 1.0) / (r * c * (c + r) if is_far else r)
+            rho[u] = ali  # kept for the far lanes below: C2 - |a_i|^2 would cancel
             h = (c0[u] + w0[u]) * n0[u] + (c1[u] + w1[u]) * n1[u] + (c2[u] + w2[u]) * n2[u]
             hmin[u] = _fmin(hmin[u], h)
             hmax[u] = _fmax(hmax[u], h)
             d2max[u] = _fmax(d2max[u], lsq)
+        if any_far:
+            for u in range(n):
+                lsq = la[u]
+                r = np.sqrt(lsq)
+                ra[u] = r
+                c = C2[u] * gamma[u]
+                rho[u] = -rho[u] / (r * c * (c + r)) if far[u] > 0.0 else 0.0
 
 
 @_vjit()
-def _block_edges(n, k, sc):
+def _block_edges(n, k, sc, any_far):
     """Accumulate (q_e - kappa) xn_e over the edges for every lane."""
     c0, c1, c2, n0, n1, n2 = sc[_ROW_C], sc[_ROW_C + 1], sc[_ROW_C + 2], sc[_ROW_N], sc[_ROW_N + 1], sc[_ROW_N + 2]
     total, gamma, far = sc[_ROW_TOTAL], sc[_ROW_GAMMA], sc[_ROW_FAR]
@@ -418,6 +430,23 @@ def _block_edges(n, k, sc):
         lai, laj = sc[_ROW_W + 3 * k + i], sc[_ROW_W + 3 * k + j]
         rai, raj = sc[_ROW_W + 4 * k + i], sc[_ROW_W + 4 * k + j]
         rhoi, rhoj = sc[_ROW_W + 5 * k + i], sc[_ROW_W + 5 * k + j]
+        if not any_far:
+            for u in range(n):
+                a0 = c0[u] + wi0[u]
+                a1 = c1[u] + wi1[u]
+                a2 = c2[u] + wi2[u]
+                e0 = wj0[u] - wi0[u]
+                e1 = wj1[u] - wi1[u]
+                e2 = wj2[u] - wi2[u]
+                x0 = a1 * e2 - a2 * e1
+                x1 = a2 * e0 - a0 * e2
+                x2 = a0 * e1 - a1 * e0
+                s2 = x0 * x0 + x1 * x1 + x2 * x2
+                ok = s2 > (_DEG * _DEG) * (lai[u] * laj[u])
+                s = np.sqrt(s2)
+                g = _atan2p(s, lai[u] + (a0 * e0 + a1 * e1 + a2 * e2)) / s
+                total[u] += g * (x0 * n0[u] + x1 * n1[u] + x2 * n2[u]) if ok else 0.0
+            continue
         for u in range(n):
             a0 = c0[u] + wi0[u]
             a1 = c1[u] + wi1[u]
@@ -442,8 +471,7 @@ def _block_edges(n, k, sc):
             series = sine < _SERIES_SINE and dot > 0.0
             d1 = _asin_ratio_m1(sine * sine) if series else g * (rai[u] * raj[u]) - 1.0
             d2 = gamma[u] * (rhoi[u] + rhoj[u]) + rhoi[u] * rhoj[u]
-            is_far = far[u] > 0.0
-            q = d1 * (gi * gj) + d2 if is_far else g
+            q = d1 * (gi * gj) + d2 if far[u] > 0.0 else g
             total[u] += q * xn if ok else 0.0
 
 
@@ -478,9 +506,9 @@ def _lambert_block(points, normals, polys, pi, qi, lo, n, mode, out, sc, redo, w
     """out[lo:lo+n] for the pairs (pi, qi)[lo:lo+n], n <= _LANES, with scratch space."""
     k = polys.shape[1]
     kb = _gather(points, normals, polys, pi, qi, lo, n, k, sc)
-    _block_setup(n, kb, sc, _FAR_RATIO if mode == 0 else 0.0)
-    _block_vertices(n, kb, sc)
-    _block_edges(n, kb, sc)
+    any_far = _block_setup(n, kb, sc, _FAR_RATIO if mode == 0 else 0.0) > 0
+    _block_vertices(n, kb, sc, any_far)
+    _block_edges(n, kb, sc, any_far)
     if _block_finish(n, kb, sc, out, lo, redo):
         for u in range(n):
             if redo[u]:
@@ -591,9 +619,9 @@ def _lambert_matrix_kernel(points, normals, polys, mode, out):
         w, h, wc = np.empty((k, 3)), np.empty(k), np.empty((2 * k, 3))
         for q in range((task % nchunks) * per, min(nsrc, (task % nchunks + 1) * per)):
             kb = _gather_source(points, normals, polys, lo, n, q, k, sc)
-            _block_setup(n, kb, sc, far_ratio)
-            _block_vertices(n, kb, sc)
-            _block_edges(n, kb, sc)
+            any_far = _block_setup(n, kb, sc, far_ratio) > 0
+            _block_vertices(n, kb, sc, any_far)
+            _block_edges(n, kb, sc, any_far)
             row = out[q]
             if _block_finish(n, kb, sc, row, lo, redo):
                 for u in range(n):

@@ -14,11 +14,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _tol
-from ._lambert import HAVE_NUMBA, _lambert_indexed_kernel, _lambert_rows_kernel, _quadrature_kernel  # noqa: F401
+from . import _memory, _tol
+from ._lambert import (HAVE_NUMBA, _lambert_indexed_kernel, _lambert_matrix_kernel,  # noqa: F401
+                       _lambert_rows_kernel, _quadrature_kernel)
 from ._validate import as_points, as_polygon, as_unit_vectors
 
-__all__ = ["point_to_polygon", "polygon_to_polygon"]
+__all__ = ["point_to_polygon", "point_to_polygons", "polygon_to_polygon"]
 
 _TWO_PI = 2.0 * np.pi
 
@@ -51,14 +52,69 @@ def point_to_polygon(points, normals, polygon) -> np.ndarray:
     >>> round(float(f[0]), 10)
     0.138531606
     """
+    polygon = as_polygon(polygon, "polygon")
+    return point_to_polygons(points, normals, polygon[None])[:, 0]
+
+
+def point_to_polygons(points, normals, polygons) -> np.ndarray:
+    """Unoccluded form factors from differential receivers to many planar polygons.
+
+    The matrix form of :func:`point_to_polygon`, e.g. a sensor grid against every patch of a
+    scene: the kernel runs on blocks of receivers against one polygon at a time, in SIMD lanes
+    and on all cores.
+
+    Parameters
+    ----------
+    points : (m, 3) float
+        Receiver positions, metres.
+    normals : (m, 3) float
+        Unit normals of the receivers (their front sides).
+    polygons : (n, k, 3) float, or a sequence of (k_i, 3) arrays
+        Planar, simple polygons, k >= 3, in either winding. Polygons with fewer vertices than
+        the longest are padded by repeating their last vertex (which adds nothing).
+
+    Returns
+    -------
+    (m, n) float
+        ``F[p, q]``: form factor from receiver p to polygon q, in [0, 1]. Only the part of a
+        polygon above a receiver's tangent plane counts. Degenerate input gives 0.
+
+    Examples
+    --------
+    Two receivers under a unit square at height 1 and a triangle beside it:
+
+    >>> import radiosity
+    >>> square = [[0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]]
+    >>> triangle = [[2, 0, 1], [3, 0, 1], [2, 1, 1]]
+    >>> f = radiosity.point_to_polygons([[0, 0, 0], [0.5, 0.5, 0]], [[0, 0, 1]] * 2, [square, triangle])
+    >>> f.shape, round(float(f[0, 0]), 10)
+    ((2, 2), 0.138531606)
+    """
     points = as_points(points, "points")
     normals = as_unit_vectors(normals, "normals")
-    polygon = as_polygon(polygon, "polygon")
     if len(points) != len(normals):
         msg = f"points and normals must have the same length, got {len(points)} and {len(normals)}"
         raise ValueError(msg)
-    polys = np.broadcast_to(polygon, (len(points),) + polygon.shape)
-    return lambert_pairs(points, normals, polys)
+    polys = _as_polygons(polygons)
+    m, n = len(points), len(polys)
+    _memory.check(f"the {m:,} x {n:,} form-factor matrix", 8 * m * n, "pass fewer receivers or polygons per call")
+    if not HAVE_NUMBA:  # pragma: no cover
+        return lambert_pairs(np.repeat(points, n, axis=0), np.repeat(normals, n, axis=0),
+                             np.tile(polys, (m, 1, 1))).reshape(m, n)
+    out = np.empty((n, m))
+    if m and n:
+        _lambert_matrix_kernel(points, normals, polys, _MODES["auto"], out)
+    return out.T
+
+
+def _as_polygons(polygons) -> np.ndarray:
+    """(n, k, 3) float64 polygons from an array or a ragged sequence (padded by repetition)."""
+    polys = [as_polygon(p, f"polygons[{q}]") for q, p in enumerate(polygons)]
+    if not polys:
+        return np.zeros((0, 3, 3))
+    k = max(len(p) for p in polys)
+    return np.ascontiguousarray(np.stack([np.concatenate([p, np.repeat(p[-1:], k - len(p), axis=0)])
+                                          for p in polys]))
 
 
 def polygon_normals(polys: np.ndarray) -> np.ndarray:
