@@ -132,6 +132,37 @@ def _split_quad(quad: np.ndarray, ku: int, kv: int) -> np.ndarray:
     return cells.reshape(-1, 4, 3)
 
 
+def _fold_cells(quad: np.ndarray, max_size: float) -> np.ndarray:
+    """Cells of a non-planar quad folded along its ``v0 v2`` diagonal (the fan triangles
+    ``v0 v1 v2`` and ``v0 v2 v3``), meeting vertex to vertex across the fold.
+
+    One k x k grid of the unit square is mapped affinely onto each flat half (``u >= v`` onto
+    the first, ``v >= u`` onto the second). Cells off the diagonal are planar quads; a cell on
+    it is cut along the fold into two triangles, or four (through the fold's midpoint) when the
+    fold segment is longer than ``max_size``. Cutting the two halves separately leaves
+    T-junctions along the fold, which show as a crease in per-vertex shading.
+    """
+    v0, v1, v2, v3 = quad
+    k = max(_cuts(float(np.linalg.norm(b - a)), max_size) for a, b in ((v0, v1), (v1, v2), (v3, v2), (v0, v3)))
+    t = np.linspace(0.0, 1.0, k + 1)
+    u, v = (x[..., None] for x in np.meshgrid(t, t, indexing="ij"))
+    first = v0 + u * (v1 - v0) + v * (v2 - v1)  # (0,0) -> v0, (1,0) -> v1, (1,1) -> v2
+    second = v0 + v * (v3 - v0) + u * (v2 - v3)  # (0,1) -> v3, (1,1) -> v2
+    grid = np.where(u >= v, first, second)
+    cells = []
+    for i in range(k):
+        for j in range(k):
+            a, b, c, d = grid[i, j], grid[i + 1, j], grid[i + 1, j + 1], grid[i, j + 1]
+            if i != j:
+                cells.append(np.stack([a, b, c, d]))
+            elif np.linalg.norm(c - a) <= max_size * (1 + 1e-9):
+                cells += [np.stack([a, b, c, c]), np.stack([a, c, d, d])]
+            else:
+                m = 0.5 * (a + c)
+                cells += [np.stack(t) for t in ((a, b, m, m), (b, c, m, m), (a, m, d, d), (m, c, d, d))]
+    return np.stack(cells)
+
+
 def _cuts(length: float, max_size: float | None) -> int:
     if max_size is None:
         return 1
@@ -198,6 +229,11 @@ def subdivide_faces(vertices: np.ndarray, faces: list[np.ndarray], max_patch_siz
         pieces, deviation = _pieces(poly, size)
         if deviation:
             report.nonplanar.append((index, deviation))
+        if deviation and len(poly) == 4 and max_patch_size is not None:
+            cells = _fold_cells(poly, max_patch_size)
+            out.append(cells)
+            owner.extend([index] * len(cells))
+            continue
         for piece in pieces:
             if len(piece) == 4:
                 cells = _split_quad(piece, *_quad_cuts(piece, max_patch_size))

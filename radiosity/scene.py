@@ -16,7 +16,7 @@ from ._validate import reject_unknown
 from .formfactors import polygon_normals
 from .io.obj import read_obj
 from .imprint import subdivide_imprinted
-from .patches import Patches, subdivide_faces
+from .patches import Patches, planar_parts, subdivide_faces
 from .quadrature import centroids_and_areas
 
 __all__ = ["Scene", "load_scene", "bundled_scene"]
@@ -124,14 +124,40 @@ class Scene:
 
     def resubdivided(self, max_patch_size: float) -> "Scene":
         """The scene cut again so no patch edge exceeds ``max_patch_size`` (materials follow)."""
-        is_triangle = (self.patch_quads[:, 3] == self.patch_quads[:, 2]).all(axis=1)
-        faces = [np.arange(4 * i, 4 * i + (3 if tri else 4)) for i, tri in enumerate(is_triangle)]
+        faces, owner = self._faces_to_cut()
         patches, _ = subdivide_faces(self.patch_quads.reshape(-1, 3), faces, max_patch_size)
-        parent = patches.patch_face
+        parent = owner[patches.patch_face]
         return replace(self, patch_quads=patches.quads, patch_object=self.patch_object[parent],
                        patch_obstruction=self.patch_obstruction[parent], patch_hidden=self.patch_hidden[parent],
                        patch_face=self.patch_face[parent], reflectance=self.reflectance[parent],
                        emission=self.emission[parent], max_patch_size=max_patch_size)
+
+    def _faces_to_cut(self) -> tuple[list[np.ndarray], np.ndarray]:
+        """Patches as faces (indices into ``patch_quads.reshape(-1, 3)``) and their patch index.
+
+        A non-planar quad arrives as its two fan triangles ``v0 v1 v2``, ``v0 v2 v3`` (one after
+        the other, same face): they are cut as the quad again, so that the cells meet vertex to
+        vertex across the fold (``patches._fold_cells``) instead of leaving a crease.
+        """
+        quads = self.patch_quads
+        is_triangle = (quads[:, 3] == quads[:, 2]).all(axis=1)
+        faces, owner = [], []
+        i = 0
+        while i < len(quads):
+            if (i + 1 < len(quads) and is_triangle[i] and is_triangle[i + 1]
+                    and self.patch_face[i] == self.patch_face[i + 1]
+                    and self.patch_hidden[i] == self.patch_hidden[i + 1]
+                    and np.array_equal(quads[i, 0], quads[i + 1, 0]) and np.array_equal(quads[i, 2], quads[i + 1, 1])):
+                quad = np.concatenate([quads[i, :3], quads[i + 1, 2:3]])
+                if planar_parts(quad, float(np.ptp(quad, axis=0).max()))[1] > 0.0:
+                    faces.append(np.array([4 * i, 4 * i + 1, 4 * i + 2, 4 * i + 6]))
+                    owner.append(i)
+                    i += 2
+                    continue
+            faces.append(np.arange(4 * i, 4 * i + (3 if is_triangle[i] else 4)))
+            owner.append(i)
+            i += 1
+        return faces, np.asarray(owner, dtype=np.int64)
 
 
 def _check_materials(rho: np.ndarray, emission: np.ndarray, where: str) -> None:

@@ -281,3 +281,15 @@ def test_load_scene_imprints_obj_files(tmp_path):
     assert patches.n_patches == 16 and not report.nonplanar
     _, areas = centroids_and_areas(patches.quads)
     assert areas.sum() == pytest.approx(4.0)
+
+
+def test_nonplanar_red_wall_cut_the_same_way_on_load_and_resubdivision():
+    """The red wall (non-planar) arrives in a coarse scene as its two fan triangles;
+    resubdividing must cut it as the folded quad, like loading at that size does."""
+    direct, again = _load(max_patch_size=0.05), _load().resubdivided(0.05)
+    wall = [s.objects.index("red_wall") for s in (direct, again)]
+    a = direct.patch_quads[direct.patch_object == wall[0]]
+    b = again.patch_quads[again.patch_object == wall[1]]
+    # 12 x 12 grid (0.5592 m / 0.05); the 12 cells on the fold (0.065 m long) cut in four
+    assert len(a) == len(b) == 12 * 12 + 3 * 12
+    np.testing.assert_allclose(np.sort(a.reshape(-1, 3), axis=0), np.sort(b.reshape(-1, 3), axis=0), atol=1e-12)

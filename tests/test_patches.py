@@ -87,6 +87,30 @@ def test_nonplanar_quad_split_by_fan_from_first_vertex():
     assert _longest_edge(patches.quads) <= 0.3 * (1 + 1e-9)
 
 
+@pytest.mark.parametrize("size", [0.3, 0.1, 0.07])
+def test_nonplanar_quad_cells_meet_vertex_to_vertex_across_the_fold(size):
+    """No T-junctions along the fold: every patch corner lying on the fold segment is a corner
+    of patches on both sides (a T-junction shows as a crease in per-vertex shading)."""
+    quad = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0.05], [0, 1, 0]], float)
+    patches, _ = subdivide_faces(quad, [np.arange(4)], size)
+    quads = patches.quads
+    _, areas = centroids_and_areas(quads)
+    assert areas.sum() == pytest.approx(_area(quad[[0, 1, 2]]) + _area(quad[[0, 2, 3]]), rel=1e-12)
+    assert _longest_edge(quads) <= size * (1 + 1e-9)
+    for q in quads:  # each patch is planar
+        assert planar_parts(q if not (q[3] == q[2]).all() else q[:3], 1.0)[1] == 0.0
+    fold = quad[2] - quad[0]
+    corners = quads.reshape(-1, 3)
+    t = (corners - quad[0]) @ fold / (fold @ fold)
+    on_fold = np.linalg.norm(quad[0] + t[:, None] * fold - corners, axis=1) < 1e-12
+    side = quad[1] - quad[0] - ((quad[1] - quad[0]) @ fold) / (fold @ fold) * fold  # towards v1's half
+    centroid_side = np.sign((quads.mean(axis=1) - quad[0]) @ side)
+    keys = {tuple(np.round(c, 12)) for c in corners[on_fold]}
+    for key in keys:
+        touching = np.any(np.linalg.norm(quads - np.array(key), axis=2) < 1e-12, axis=1)
+        assert set(centroid_side[touching]) == {-1.0, 1.0}, key
+
+
 def test_degenerate_face_reported_and_dropped():
     line = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0]], float)
     square = np.array([[0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
