@@ -60,7 +60,11 @@ class Solution:
         """Welded vertices (per face), faces as index lists, and area-weighted vertex radiosity.
 
         Vertices are merged only within one OBJ face, so light does not bleed across a contact
-        (the floor under a block stays dark at the block's edge) and creases stay sharp.
+        or a crease; hidden patches (under a contact) do not weigh on the vertices they share
+        with visible ones. A
+        vertex of one patch lying inside another patch's edge (a T-junction, where cells cut
+        differently meet) is inserted into that patch's outline, so the shading is continuous
+        across the edge instead of showing a facet.
         """
         quads = self.scene.patch_quads
         n = len(quads)
@@ -71,17 +75,17 @@ class Solution:
         _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
         inverse = inverse.reshape(n, 4)
         vertices = pts[first]
-        weight = np.repeat(self.scene.patch_area, 4)
-        value = np.repeat(self.radiosity, 4, axis=0)
-        corner_ok = np.ones((n, 4), bool)
-        corner_ok[is_tri, 3] = False
-        ok = corner_ok.ravel()
-        sums = np.zeros((len(vertices), 3))
-        np.add.at(sums, inverse.ravel()[ok], value[ok] * weight[ok, None])
-        wsum = np.zeros(len(vertices))
-        np.add.at(wsum, inverse.ravel()[ok], weight[ok])
-        vertex_b = sums / np.maximum(wsum, 1e-300)[:, None]
         faces = [inverse[i, :3] if is_tri[i] else inverse[i] for i in range(n)]
+        faces = _insert_t_junctions(vertices, faces, self.scene.patch_face, grid)
+        corner = np.concatenate(faces)
+        owner = np.repeat(np.arange(n), [len(f) for f in faces])
+        # Hidden patches (covered by a contact) are never seen: they must not darken the
+        # visible patches around them. A vertex only they touch keeps their value.
+        weight = self.scene.patch_area[owner] * np.where(self.scene.patch_hidden[owner], 1e-9, 1.0)
+        sums = np.zeros((len(vertices), 3))
+        np.add.at(sums, corner, self.radiosity[owner] * weight[:, None])
+        wsum = np.bincount(corner, weights=weight, minlength=len(vertices))
+        vertex_b = sums / np.maximum(wsum, 1e-300)[:, None]
         return vertices, faces, vertex_b
 
     def irradiance(self, points, normals, *, samples: int = 2) -> np.ndarray:
@@ -142,3 +146,30 @@ class Solution:
             "energy_W": self.energy,
             "notes": list(scene.notes),
         }
+
+
+def _insert_t_junctions(vertices: np.ndarray, faces: list[np.ndarray], patch_face: np.ndarray,
+                        tol: float) -> list[np.ndarray]:
+    """Patch outlines with the vertices of the same OBJ face that lie inside their edges
+    inserted in order along each edge (distance below ``tol``)."""
+    out = list(faces)
+    for face in np.unique(patch_face):
+        members = np.flatnonzero(patch_face == face)
+        candidates = np.unique(np.concatenate([faces[i] for i in members]))
+        points = vertices[candidates]
+        for i in members:
+            outline = faces[i]
+            grown = []
+            for a, b in zip(outline, np.roll(outline, -1)):
+                grown.append([a])
+                d = vertices[b] - vertices[a]
+                length2 = float(d @ d)
+                if length2 == 0.0:
+                    continue
+                t = (points - vertices[a]) @ d / length2
+                off = points - vertices[a] - t[:, None] * d
+                inside = (t > 1e-9) & (t < 1 - 1e-9) & (np.einsum("pc,pc->p", off, off) < tol * tol)
+                grown.append(candidates[inside][np.argsort(t[inside])])
+            if sum(len(g) for g in grown) > len(outline):
+                out[i] = np.concatenate(grown).astype(outline.dtype)
+    return out

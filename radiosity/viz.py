@@ -45,6 +45,25 @@ def to_polydata(solution):
     return mesh
 
 
+def _render_mesh(solution):
+    """Triangles for the picture: each patch outline fanned from its first corner.
+
+    Outlines carry the T-junction vertices of their neighbours (``Solution.vertex_mesh``), so
+    they have collinear points, which VTK's polygon triangulation mishandles (stray pixels);
+    a fan from a corner gives only proper or zero-area triangles.
+    """
+    import pyvista as pv
+
+    vertices, faces, vertex_b = solution.vertex_mesh
+    tris = np.concatenate([np.column_stack([np.full(len(f) - 2, f[0]), f[1:-1], f[2:]]) for f in faces])
+    a, b, c = (vertices[tris[:, k]] for k in range(3))
+    twice_area = np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    tris = tris[twice_area > 1e-12 * solution.scene.scale**2]  # collinear corners: no triangle
+    mesh = pv.PolyData(vertices, np.column_stack([np.full(len(tris), 3), tris]).ravel().astype(np.int64))
+    mesh.point_data["radiosity"] = vertex_b
+    return mesh
+
+
 def scene_camera(source: str):
     """Camera written in the OBJ as ``# camera: px py pz fx fy fz ux uy uz fov``, if any."""
     try:
@@ -75,7 +94,7 @@ def render(solution, path: str | Path | None = None, *, window_size=(800, 800), 
     import pyvista as pv
 
     _quiet_vtk()
-    mesh = to_polydata(solution)
+    mesh = _render_mesh(solution)
     exposure = auto_exposure(solution) if exposure is None else exposure
     mesh.point_data["rgb"] = tone_map(mesh.point_data["radiosity"] / np.pi, exposure)
     plotter = pv.Plotter(off_screen=off_screen, window_size=list(window_size))

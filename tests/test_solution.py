@@ -78,3 +78,37 @@ def test_vertex_values_lie_within_patch_values():
     assert np.isfinite(vertex_b).all()
     assert vertex_b.min() >= sol.radiosity.min() - 1e-12
     assert vertex_b.max() <= sol.radiosity.max() + 1e-12
+
+
+def test_vertex_mesh_has_no_t_junctions_and_ignores_hidden_patches():
+    """Within each OBJ face no vertex lies inside another patch's edge (imprinted cells are
+    cut differently on either side of an outline), and vertices on the rim of a hidden region
+    (under a block) take only the visible patches' values."""
+    scene = radiosity.load_scene(radiosity.bundled_scene("cornell_box"))
+    sol = radiosity.solve(scene, preset="draft", cache=False)
+    vertices, faces, vertex_b = sol.vertex_mesh
+    s = sol.scene
+    tol = 1e-7 * s.scale
+    for face in np.unique(s.patch_face):
+        members = np.flatnonzero(s.patch_face == face)
+        points = vertices[np.unique(np.concatenate([faces[i] for i in members]))]
+        for i in members:
+            ring = vertices[faces[i]]
+            for a, b in zip(ring, np.roll(ring, -1, axis=0)):
+                d = b - a
+                t = (points - a) @ d / (d @ d)
+                off = np.linalg.norm(points - a - t[:, None] * d, axis=1)
+                assert not ((t > 1e-6) & (t < 1 - 1e-6) & (off < tol)).any()
+    hidden = s.patch_hidden
+    assert hidden.any()
+    sums, weights = np.zeros((len(vertices), 3)), np.zeros(len(vertices))
+    rim = np.zeros(len(vertices), bool)
+    for i, ring in enumerate(faces):
+        if hidden[i]:
+            rim[ring] = True
+        else:
+            sums[ring] += s.patch_area[i] * sol.radiosity[i]
+            weights[ring] += s.patch_area[i]
+    rim &= weights > 0
+    assert rim.sum() > 10
+    np.testing.assert_allclose(vertex_b[rim], sums[rim] / weights[rim, None], rtol=1e-6)
