@@ -136,3 +136,113 @@ def test_adaptive_rays_refine_only_partial_pairs():
     assert f[0] == pytest.approx(0.5, abs=0.05)
     exact = vis.fraction(np.array([0]), np.array([2]), exact=True, order=6)
     assert exact[0] == pytest.approx(0.5, abs=1e-9)  # symmetric about the edge
+
+
+# ---------------------------------------------------------------- compiled kernels vs references
+def boxes_scene():
+    """Floor, ceiling and two boxes (10 occluder faces) between them: a small Cornell box."""
+    from test_assembly import grid
+
+    def box(x0, x1, y0, y1, h):
+        c = [[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
+        faces = [rect(x0, x1, y0, y1, h)]
+        for k in range(4):
+            (a0, b0), (a1, b1) = c[k], c[(k + 1) % 4]
+            faces.append(np.array([[a0, b0, 0], [a1, b1, 0], [a1, b1, h], [a0, b0, h]], float))
+        return faces
+
+    parts = [grid(8, 0, down=False), grid(4, 1, down=True), np.array(box(0.2, 0.45, 0.2, 0.5, 0.6)),
+             np.array(box(0.55, 0.8, 0.4, 0.7, 0.35))]
+    groups = np.repeat(np.arange(len(parts)), [len(p) for p in parts])
+    return np.concatenate(parts), groups
+
+
+def all_pairs(n):
+    i, j = np.nonzero(~np.eye(n, dtype=bool))
+    return i, j
+
+
+def test_fused_classification_matches_numpy_reference():
+    quads, groups = boxes_scene()
+    vis = make_vis(quads, groups)
+    i, j = all_pairs(len(quads))
+    status, rows, occ = vis.classify(i, j)
+    ref_status, ref_rows, ref_occ = vis._classify(quads[i], quads[j], np.minimum(vis._lo[i], vis._lo[j]),
+                                                  np.maximum(vis._hi[i], vis._hi[j]))
+    np.testing.assert_array_equal(status, ref_status)
+    assert {FREE, FULL, MAYBE} <= set(status.tolist())
+    assert sorted(zip(rows.tolist(), occ.tolist())) == sorted(zip(ref_rows.tolist(), ref_occ.tolist()))
+    # the classification is a property of the segments between two patches: symmetric
+    back, _, _ = vis.classify(j, i)
+    np.testing.assert_array_equal(back, status)
+
+
+def test_segment_rays_match_embree_and_the_numpy_reference():
+    """Rays tested against each pair's own occluders (float64) = Embree against every patch."""
+    quads, groups = boxes_scene()
+    vis = make_vis(quads, groups, samples=3, max_samples=5)
+    i, j = all_pairs(len(quads))
+    status, rows, occ = vis.classify(i, j)
+    part = np.flatnonzero(status == MAYBE)
+    local = np.full(len(i), -1)
+    local[part] = np.arange(len(part))
+    ii, jj = i[part], j[part]
+    segments = vis.ray_fraction(ii, jj, rows=local[rows], occ=occ)
+    assert vis.ray_fraction(ii, jj) == pytest.approx(segments, abs=0)  # classifies by itself
+    key = ii.astype(np.uint64) * np.uint64(len(quads)) + jj.astype(np.uint64)
+    xs, wx = stratified_points_reference(quads[ii], 3, key, 1)
+    embree, agree = vis._trace(xs, wx, vis.normals[ii], jj, 3, key)
+    reference, ref_agree = vis._trace_numpy(xs, wx, vis.normals[ii], jj, 3, key)
+    np.testing.assert_allclose(embree, reference, rtol=1e-12, atol=1e-15)
+    np.testing.assert_array_equal(agree, ref_agree)
+    from radiosity.visibility import _occluder_lists
+
+    seg, seg_agree = vis._trace(xs, wx, vis.normals[ii], jj, 3, key, _occluder_lists(local[rows], occ, len(ii)))
+    assert 0 < np.mean(seg) < 1 and not agree.all()
+    np.testing.assert_allclose(seg, embree, atol=1e-12)  # jittered rays miss edges: no disagreement
+    np.testing.assert_array_equal(seg_agree, agree)
+
+
+def stratified_points_reference(quads, samples, key, salt):
+    from radiosity.visibility import stratified_points
+    from radiosity.visibility._ray_kernel import stratified_points as compiled
+
+    pts, w = stratified_points(quads, samples, key, salt)
+    cpts, cw = compiled(quads, np.arange(len(quads)), samples, key, salt)
+    np.testing.assert_array_equal(cpts, pts)
+    np.testing.assert_array_equal(cw, w)
+    return pts, w
+
+
+@pytest.mark.parametrize("max_union", [10, 1])
+def test_union_by_inclusion_exclusion_matches_shapely(monkeypatch, max_union):
+    """Several overlapping occluders at one point: compiled union (or the shapely fallback)."""
+    from radiosity.visibility import _exact
+
+    monkeypatch.setattr(_exact, "MAX_UNION", max_union)
+    rng = np.random.default_rng(3)
+    n_groups, per = 40, 5
+    x = np.repeat(rng.uniform(-0.5, 0.5, (n_groups, 3)) * [1, 1, 0], per, axis=0)
+    nx = np.tile([0, 0, 1.0], (n_groups * per, 1))
+    source = np.repeat(SOURCE[None], n_groups * per, axis=0)
+    sn = np.tile([0, 0, -1.0], (n_groups * per, 1))
+    occ = np.array([rect(-r, r, -r, r, 0) + [cx, cy, h] for cx, cy, r, h in
+                    zip(*rng.uniform([-0.8, -0.8, 0.1, 0.3], [0.8, 0.8, 0.5, 1.7], (n_groups * per, 4)).T)])
+    on = np.tile([0, 0, 1.0], (n_groups * per, 1))
+    group = np.repeat(np.arange(n_groups), per)
+    got = _exact.hidden_factors(x, nx, group, source, sn, occ, on, 1e-9)
+    ref = _exact._hidden_factors_shapely(x, nx, group, source, sn, occ, on, 1e-9)
+    assert (ref > 0).all()
+    np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-14)
+
+
+def test_exact_fraction_falls_back_to_shapely_unions(monkeypatch):
+    import radiosity.visibility as visibility
+
+    quads, groups = boxes_scene()
+    i, j = all_pairs(len(quads))
+    compiled = make_vis(quads, groups).fraction(i, j, exact=True, order=3)
+    monkeypatch.setattr(visibility, "MAX_UNION", 1)
+    fallback = make_vis(quads, groups).fraction(i, j, exact=True, order=3)
+    assert 0 < compiled.mean() < 1
+    np.testing.assert_allclose(fallback, compiled, rtol=1e-9, atol=1e-12)

@@ -11,10 +11,16 @@ Pairs are classified before any ray is traced (``_occluders``):
    the 16 vertex-to-vertex segments: free, fully blocking, or maybe.
 
 Pairs with a fully blocking occluder are 0; pairs with only free occluders are 1; the others
-("partial") get either stratified shadow rays through Embree, adaptive (``samples**4`` rays per
-pair, and ``max_samples**4`` where those disagree), or exact shadows (``_exact``): the hidden
-part of the source is clipped by the occluders' cones from each receiver quadrature point and
-its Lambert form factor subtracted.
+("partial") get either stratified shadow rays, adaptive (``samples**4`` rays per pair, and
+``max_samples**4`` where those disagree), or exact shadows (``_exact``): the hidden part of the
+source is clipped by the occluders' cones from each receiver quadrature point and its Lambert
+form factor subtracted. A shadow ray is tested, in float64, only against the occluder polygons
+left undecided for its pair (``_ray_kernel``): no other polygon can block it. Embree casts rays
+against every patch only when culling is off (robustness tests).
+
+Classification, rays and exact shadows are compiled (numba) loops over pairs; the numpy
+versions (``Visibility._classify``, ``Visibility._trace_numpy``, ``_occluders.classify_rows_numpy``,
+``_exact._hidden_factors_shapely``) are the references the tests compare them with.
 """
 
 from __future__ import annotations
@@ -25,7 +31,8 @@ from scipy.spatial import ConvexHull, QhullError
 from .. import _tol
 from ..quadrature import patch_points
 from . import _occluders
-from ._constants import CHUNK_SHADOWS, PLANE_REL, WEIGHT_FLOOR_REL
+from ._constants import (CHUNK_CLASSIFY, CHUNK_SHADOWS, MAX_UNION, PLANE_REL, RAY_TFAR_SHORT,
+                         WEIGHT_FLOOR_REL)
 from ._exact import hidden_factors, point_factors
 from ._occluders import FREE, FULL, MAYBE, build_occluders
 
@@ -100,6 +107,23 @@ def stratified_points(quads: np.ndarray, samples: int, key: np.ndarray, salt: in
     return points, weights
 
 
+def _occluder_lists(rows: np.ndarray, occ: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """(starts (m + 1,), occ sorted by row): pair p's occluders are ``occ[starts[p]:starts[p + 1]]``."""
+    srt = np.argsort(rows, kind="stable")
+    starts = np.zeros(m + 1, np.int64)
+    np.cumsum(np.bincount(rows, minlength=m), out=starts[1:])
+    return starts, np.ascontiguousarray(occ[srt], dtype=np.int64)
+
+
+def _subset_lists(starts: np.ndarray, occ: np.ndarray, sel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The occluder lists of pairs ``sel`` (in that order)."""
+    count = starts[sel + 1] - starts[sel]
+    new = np.zeros(len(sel) + 1, np.int64)
+    np.cumsum(count, out=new[1:])
+    idx = np.repeat(starts[sel] - new[:-1], count) + np.arange(new[-1])
+    return new, occ[idx]
+
+
 class Visibility:
     """Fractional visibility between patches: exact classification, then rays or exact shadows.
 
@@ -133,6 +157,7 @@ class Visibility:
         self.cull = cull
         mask = occluder_mask(quads, scale) if cull else np.ones(len(quads), bool)
         self.n_occluders = int(mask.sum())
+        self._occluder_patches = mask
         self.occluders = build_occluders(quads, normals, np.asarray(groups), mask, scale)
         self._lo = quads.min(axis=1)
         self._hi = quads.max(axis=1)
@@ -151,12 +176,39 @@ class Visibility:
             ``MAYBE`` (partly occluded).
         rows, occluder : (t,) int
             For the partly occluded pairs: the pair (index into i, j) and each occluder polygon
-            that may block it.
+            that may block it, sorted by pair.
         """
-        return self._classify(self.quads[i], self.quads[j],
-                              np.minimum(self._lo[i], self._lo[j]), np.maximum(self._hi[i], self._hi[j]))
+        if not self.cull:
+            return self._classify(self.quads[i], self.quads[j], np.minimum(self._lo[i], self._lo[j]),
+                                  np.maximum(self._hi[i], self._hi[j]))
+        return self._classify_pairs(self.quads, np.asarray(i), self.quads, np.asarray(j))
+
+    def _classify_pairs(self, va, ia, vb, ib):
+        """Compiled classification of pairs (va[ia], vb[ib]): BVH walk and exact test fused."""
+        from ._exact_kernel import classify_pairs
+
+        m = len(ia)
+        occ = self.occluders
+        if occ.n_occluders == 0 or m == 0:
+            return np.full(m, FREE, np.int8), np.zeros(0, np.int64), np.zeros(0, np.int64)
+        va = np.ascontiguousarray(va, dtype=np.float64)
+        vb = np.ascontiguousarray(vb, dtype=np.float64)
+        status = np.empty(m, np.int8)
+        rows, occs = [], []
+        for s in range(0, m, CHUNK_CLASSIFY):
+            e = min(m, s + CHUNK_CLASSIFY)
+            st, starts, k = classify_pairs(va, np.ascontiguousarray(ia[s:e], dtype=np.int64), vb,
+                                           np.ascontiguousarray(ib[s:e], dtype=np.int64), occ.polys, occ.normal,
+                                           occ.center, occ.inward, occ.lo, occ.hi, occ.node_lo, occ.node_hi,
+                                           occ.node_left, occ.node_right, occ.node_start, occ.node_count,
+                                           occ.order, PLANE_REL * self.scale, PLANE_REL * self.scale)
+            status[s:e] = st
+            rows.append(s + np.repeat(np.arange(e - s), np.diff(starts)))
+            occs.append(k)
+        return status, np.concatenate(rows), np.concatenate(occs)
 
     def _classify(self, vi, vj, lo, hi):
+        """Reference classification in numpy (and the path for ``cull=False``)."""
         m = len(vi)
         status = np.full(m, FREE, np.int8)
         pad = PLANE_REL * self.scale
@@ -201,27 +253,44 @@ class Visibility:
                 local[part] = np.arange(len(part))
                 out[part] = self.exact_fraction(i[part], j[part], local[rows], occ, order)
             else:
-                out[part] = self.ray_fraction(i[part], j[part])
+                local = np.full(len(i), -1)
+                local[part] = np.arange(len(part))
+                out[part] = self.ray_fraction(i[part], j[part], rows=local[rows], occ=occ)
         return out
 
     def ray_fraction(self, i: np.ndarray, j: np.ndarray, samples: int | None = None,
-                     max_samples: int | None = None) -> np.ndarray:
+                     max_samples: int | None = None, *, rows: np.ndarray | None = None,
+                     occ: np.ndarray | None = None) -> np.ndarray:
         """(m,) kernel-weighted unblocked fraction by stratified rays, refined where they disagree.
 
         Each ray from a sample x on i to a sample y on j is weighted by the area weights of both
         samples times the differential form factor cos_i cos_j / r^2, which is zero where y is
         behind i's plane: rays never count the hidden part of a source that straddles the
         receiver's horizon.
+
+        With culling on (the default), each ray is intersected only with the occluder polygons
+        that the classification left undecided for its pair (``rows``/``occ`` from
+        :meth:`classify`, with ``rows`` indexing i and j; classified here if not given), in
+        float64. With ``cull=False`` every ray is cast through Embree against every patch.
         """
         s0 = samples or self.samples
         s1 = max(max_samples or self.max_samples, s0)
+        i = np.ascontiguousarray(i, dtype=np.int64)
+        j = np.ascontiguousarray(j, dtype=np.int64)
         key = i.astype(np.uint64) * np.uint64(len(self.quads)) + j.astype(np.uint64)
-        xs, wx = stratified_points(self.quads[i], s0, key, 1)
-        frac, agree = self._weighted_fraction(xs, wx, self.normals[i], j, s0, key)
+        lists = None
+        full = np.zeros(len(i), bool)
+        if self.cull:
+            if rows is None or occ is None:
+                status, rows, occ = self.classify(i, j)
+                full = status == FULL
+            lists = _occluder_lists(rows, occ, len(i))
+        frac, agree = self._patch_rays(i, j, s0, key, 1, lists)
         if s1 > s0 and not agree.all():
             redo = np.flatnonzero(~agree)
-            xs, wx = stratified_points(self.quads[i[redo]], s1, key[redo], 3)
-            frac[redo] = self._weighted_fraction(xs, wx, self.normals[i[redo]], j[redo], s1, key[redo])[0]
+            sub = None if lists is None else _subset_lists(*lists, redo)
+            frac[redo] = self._patch_rays(i[redo], j[redo], s1, key[redo], 3, sub)[0]
+        frac[full] = 0.0
         return frac
 
     def exact_fraction(self, i: np.ndarray, j: np.ndarray, rows: np.ndarray, occ: np.ndarray, order: int
@@ -231,43 +300,42 @@ class Visibility:
         ``rows``/``occ`` list the occluder polygons that may block each pair (from
         :meth:`classify`). The fraction is ``1 - sum_q w_q F(x_q -> hidden) / sum_q w_q F(x_q -> j)``.
         """
+        from ._exact_kernel import exact_pairs
+
         pts, w = patch_points(self.quads, order)
         q = pts.shape[1]
         out = np.ones(len(i))
         srt = np.argsort(rows, kind="stable")
         rows, occ = rows[srt], occ[srt]
-        per_pair = np.bincount(rows, minlength=len(i))
-        ends = np.cumsum(per_pair)
-        step_pairs = max(1, CHUNK_SHADOWS // max(1, q * max(1, int(per_pair.max(initial=1)))))
-        for s in range(0, len(i), step_pairs):
-            e = min(len(i), s + step_pairs)
+        ends = np.cumsum(np.bincount(rows, minlength=len(i)))
+        step = max(1, CHUNK_SHADOWS // q)
+        o = self.occluders
+        tol = PLANE_REL * self.scale
+        for s in range(0, len(i), step):
+            e = min(len(i), s + step)
             a, b = (ends[s - 1] if s else 0), ends[e - 1]
-            out[s:e] = self._exact_chunk(i[s:e], j[s:e], rows[a:b] - s, occ[a:b], pts, w)
+            starts = np.r_[0, ends[s:e] - a]
+            unocc, hidden, ok = exact_pairs(pts, self.normals, self.quads, np.ascontiguousarray(i[s:e]),
+                                            np.ascontiguousarray(j[s:e]), starts, occ[a:b], o.polys, o.normal,
+                                            tol, MAX_UNION)
+            self.n_exact_rows += (b - a) * q
+            if not ok.all():
+                hidden[~ok] = self._hidden_at(pts, i[s:e], j[s:e], starts, occ[a:b], ~ok)
+            hidden = np.minimum(hidden, unocc)
+            total = (unocc * w[i[s:e]]).sum(axis=1)
+            lost = (hidden * w[i[s:e]]).sum(axis=1)
+            out[s:e] = np.where(total > 0, 1.0 - lost / np.where(total > 0, total, 1.0), 1.0)
         return out
 
-    def _exact_chunk(self, i, j, rows, occ, pts, w):
-        q = pts.shape[1]
-        x = pts[i].reshape(-1, 3)  # (m*q, 3), point p*q + a
-        nx = np.repeat(self.normals[i], q, axis=0)
-        unocc = point_factors(x, nx, np.repeat(self.quads[j], q, axis=0)).reshape(-1, q)
-        # one row per (maybe occluder, receiver point)
-        r = np.repeat(rows, q)
-        a = np.tile(np.arange(q), len(rows))
-        k = np.repeat(occ, q)
-        group = r * q + a
-        _, group = np.unique(group, return_inverse=True)
-        group = group.ravel()
-        xr = pts[i[r], a]
-        hidden_g = hidden_factors(xr, self.normals[i[r]], group, self.quads[j[r]], self.normals[j[r]],
-                                  self.occluders.polys[k], self.occluders.normal[k], PLANE_REL * self.scale)
-        self.n_exact_rows += len(r)
-        hidden = np.zeros(len(i) * q)
-        first = np.unique(group, return_index=True)[1]
-        hidden[(r * q + a)[first]] = hidden_g
-        hidden = np.minimum(hidden.reshape(-1, q), unocc)
-        total = (unocc * w[i]).sum(axis=1)
-        lost = (hidden * w[i]).sum(axis=1)
-        return np.where(total > 0, 1.0 - lost / np.where(total > 0, total, 1.0), 1.0)
+    def _hidden_at(self, pts, i, j, starts, occ, where):
+        """Hidden form factors at the receiver points where the kernel left them (shapely unions)."""
+        p, a = np.nonzero(where)
+        count = np.diff(starts)[p]
+        r = np.repeat(np.arange(len(p)), count)
+        k = occ[np.repeat(starts[p], count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)]
+        return hidden_factors(pts[i[p[r]], a[r]], self.normals[i[p[r]]], r, self.quads[j[p[r]]],
+                              self.normals[j[p[r]]], self.occluders.polys[k], self.occluders.normal[k],
+                              PLANE_REL * self.scale)
 
     # ------------------------------------------------------------------ points (final gather)
     def point_fraction(self, points: np.ndarray, normals: np.ndarray, j: np.ndarray, *,
@@ -287,8 +355,11 @@ class Visibility:
         if self.occluders.n_occluders == 0 or len(j) == 0:
             return out
         vi = np.repeat(points[:, None, :], 4, axis=1)
-        status, rows, occ = self._classify(vi, self.quads[j], np.minimum(points, self._lo[j]),
-                                           np.maximum(points, self._hi[j]))
+        if self.cull:
+            status, rows, occ = self._classify_pairs(vi, np.arange(len(j)), self.quads, np.asarray(j))
+        else:
+            status, rows, occ = self._classify(vi, self.quads[j], np.minimum(points, self._lo[j]),
+                                               np.maximum(points, self._hi[j]))
         out[status == FULL] = 0.0
         part = np.flatnonzero(status == MAYBE)
         if not len(part):
@@ -310,22 +381,50 @@ class Visibility:
         else:
             ones = np.ones((len(part), 1))
             key = np.arange(len(part), dtype=np.uint64)
+            local = np.full(len(j), -1)
+            local[part] = np.arange(len(part))
+            lists = _occluder_lists(local[rows], occ, len(part)) if self.cull else None
             frac, _ = self._weighted_fraction(points[part][:, None, :], ones, normals[part], j[part],
-                                              self.samples, key)
+                                              self.samples, key, lists)
             out[part] = frac
         return out
 
     # ------------------------------------------------------------------ rays
     def _occluder(self):
+        """The Embree scene of the occluder patches (every patch with ``cull=False``).
+
+        Faces on the convex hull can block only segments in their own plane, and ray ends are
+        pulled off their surfaces into the hull, so leaving those faces out changes no answer
+        (the classification already ignores them) and makes each ray cheaper.
+        """
         if self._tracer is None:
             from ._embree import EmbreeOccluder
 
-            tris = np.concatenate([self.quads[:, [0, 1, 2]], self.quads[:, [0, 2, 3]]], axis=0)
+            quads = self.quads[self._occluder_patches]
+            tris = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]], axis=0)
             area = np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
             self._tracer = EmbreeOccluder(tris[area > 0])
         return self._tracer
 
-    def _weighted_fraction(self, receivers, receiver_weights, receiver_normals, j, samples, key):
+    def _patch_rays(self, i, j, samples, key, salt, lists=None):
+        """Fractions by rays between stratified samples of patches i (``salt``) and j, chunked.
+
+        ``lists``: (starts, occ), pair p's undecided occluders ``occ[starts[p]:starts[p + 1]]``
+        (segment tests); None: Embree against the occluder patches (all patches with ``cull=False``).
+        """
+        from ._ray_kernel import stratified_points as points
+
+        out = np.empty(len(j))
+        agree = np.empty(len(j), bool)
+        step = max(1, _tol.CHUNK_RAYS // samples**4)
+        for s in range(0, len(j), step):
+            e = min(len(j), s + step)
+            xs, wx = points(self.quads, i[s:e], samples, key[s:e], salt)
+            sub = None if lists is None else _subset_lists(*lists, np.arange(s, e))
+            out[s:e], agree[s:e] = self._trace(xs, wx, self.normals[i[s:e]], j[s:e], samples, key[s:e], sub)
+        return out, agree
+
+    def _weighted_fraction(self, receivers, receiver_weights, receiver_normals, j, samples, key, lists=None):
         """Weighted unblocked fraction of rays from receivers (p, a, 3) to samples of j.
 
         Returns the fraction and whether all rays that carry weight agreed.
@@ -334,14 +433,39 @@ class Visibility:
         agree = np.empty(len(j), bool)
         per_pair = receivers.shape[1] * samples * samples
         step = max(1, _tol.CHUNK_RAYS // per_pair)
+        j = np.ascontiguousarray(j, dtype=np.int64)
         for s in range(0, len(j), step):
-            sl = slice(s, s + step)
-            ys, wy = stratified_points(self.quads[j[sl]], samples, key[sl], 2)
-            out[sl], agree[sl] = self._fraction_chunk(receivers[sl], receiver_weights[sl], receiver_normals[sl],
-                                                      ys, wy, self.normals[j[sl]])
+            e = min(len(j), s + step)
+            sub = None if lists is None else _subset_lists(*lists, np.arange(s, e))
+            out[s:e], agree[s:e] = self._trace(np.ascontiguousarray(receivers[s:e], dtype=np.float64),
+                                               np.ascontiguousarray(receiver_weights[s:e], dtype=np.float64),
+                                               np.ascontiguousarray(receiver_normals[s:e], dtype=np.float64),
+                                               j[s:e], samples, key[s:e], sub)
         return out, agree
 
-    def _fraction_chunk(self, xs, wx, nx, ys, wy, ny):
+    def _trace(self, xs, wx, nx, j, samples, key, lists=None):
+        """Fraction and agreement of one chunk of pairs (compiled; see :meth:`_patch_rays`)."""
+        from ._ray_kernel import ray_fractions, segment_fractions, shadow_rays
+
+        if lists is not None:
+            o = self.occluders
+            starts, occ = lists
+            frac, agree, n_traced = segment_fractions(
+                xs, wx, nx, self.quads, self.normals, j, samples, key, 2, WEIGHT_FLOOR_REL,
+                _tol.RAY_OFFSET_REL * self.scale, 1.0 - RAY_TFAR_SHORT, starts, occ, o.polys, o.normal, o.center,
+                o.inward, PLANE_REL * self.scale)
+            self.n_rays += int(n_traced.sum())
+            return frac, agree
+        weight, starts, traced, origins, ends = shadow_rays(xs, wx, nx, self.quads, self.normals, j, samples, key,
+                                                            2, WEIGHT_FLOOR_REL, _tol.RAY_OFFSET_REL * self.scale)
+        blocked = self._occluder().occluded(origins, ends)
+        self.n_rays += len(origins)
+        return ray_fractions(weight, traced, starts, blocked)
+
+    def _trace_numpy(self, xs, wx, nx, j, samples, key):
+        """Reference for :meth:`_trace` in numpy (same rays, same weights)."""
+        ys, wy = stratified_points(self.quads[j], samples, key, 2)
+        ny = self.normals[j]
         off = _tol.RAY_OFFSET_REL * self.scale
         x = xs[:, :, None, :] + off * nx[:, None, None, :]
         y = ys[:, None, :, :] + off * ny[:, None, None, :]
@@ -355,7 +479,6 @@ class Visibility:
         x, y = np.broadcast_arrays(x, y)
         blocked = np.zeros(weight.shape, bool)
         blocked[traced] = self._occluder().occluded(x[traced], y[traced])
-        self.n_rays += int(traced.sum())
         total = weight.sum(axis=(1, 2))
         visible = (weight * ~blocked).sum(axis=(1, 2))
         n_traced = traced.sum(axis=(1, 2))

@@ -23,8 +23,15 @@ BVH_LEAF = 4
 # Candidate (pair, occluder) rows examined per chunk (bounds temporary memory, ~0.5 GB).
 CHUNK_TRIPLES = 400_000
 
+# Pairs classified per call of the compiled classification (bounds its buffers, ~20 MB).
+CHUNK_CLASSIFY = 262_144
+
 # Exact-shadow rows (receiver point, source, occluder) per numpy chunk.
 CHUNK_SHADOWS = 100_000
+
+# Most hidden polygons at one receiver point united by inclusion-exclusion (2**n terms at worst,
+# pruned where intersections are empty); more go to shapely.
+MAX_UNION = 10
 
 # Kernel weights below this fraction of a pair's largest weight count as zero when deciding
 # whether a pair's rays agree (a sample on the receiver's horizon carries no light).

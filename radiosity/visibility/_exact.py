@@ -10,15 +10,19 @@ by the cone's planes is the same operation without the division). The hidden par
 is Lambert's closed form of that convex polygon (which also clips it to x's horizon), and the
 visible form factor is ``F(x -> S) - F(x -> hidden)`` by additivity.
 
-When several occluders hide parts of S from one point, their hidden polygons may overlap:
-those few rows are united in S's plane with shapely, and the union's form factor is the sum
-over its rings (exterior rings add, holes subtract).
+When several occluders hide parts of S from one point, their hidden polygons may overlap.
+Their union's form factor is found by inclusion-exclusion: the hidden polygons and all their
+intersections are convex polygons in S's plane, so F(A u B) = F(A) + F(B) - F(A n B) needs only
+more clipping (compiled, ``_exact_kernel``). Past ``MAX_UNION`` polygons at one point they are
+united with shapely instead, and the union's form factor is the sum over its rings (exterior
+rings add, holes subtract).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ._constants import MAX_UNION
 
 __all__ = ["clip_convex", "hidden_polygons", "hidden_factors", "point_factors", "union_factors"]
 
@@ -171,10 +175,34 @@ def hidden_factors(x: np.ndarray, nx: np.ndarray, group: np.ndarray, source: np.
                    tol: float) -> np.ndarray:
     """Form factor of the hidden part of each group's source (rows: one occluder each).
 
-    Rows of a group share x, nx and source; the result is indexed by group (0..g-1). Rows are
-    clipped by the compiled kernel; groups where two or more occluders hide something are
-    united with shapely.
+    Rows of a group share x, nx and source; the result is indexed by group (0..g-1). The
+    compiled kernel clips every row and unites a group's hidden polygons by inclusion-exclusion
+    over their (convex) intersections; groups where more than ``MAX_UNION`` occluders hide
+    something are united with shapely instead.
     """
+    from ._exact_kernel import hidden_groups
+
+    n_groups = int(group.max()) + 1 if len(group) else 0
+    out = np.zeros(n_groups)
+    if n_groups == 0:
+        return out
+    order = np.argsort(group, kind="stable")
+    starts = np.r_[0, np.cumsum(np.bincount(group, minlength=n_groups))]
+    args = [np.ascontiguousarray(a[order], dtype=np.float64) for a in (x, nx, source, source_normal)]
+    polys = np.ascontiguousarray(occluder[order], dtype=np.float64)
+    normals = np.ascontiguousarray(occluder_normal[order], dtype=np.float64)
+    out[:], ok = hidden_groups(*args, np.arange(len(order)), starts, polys, normals, float(tol), MAX_UNION)
+    if not ok.all():
+        bad = np.flatnonzero(~ok)
+        rows = order[np.concatenate([np.arange(starts[g], starts[g + 1]) for g in bad])]
+        _, local = np.unique(group[rows], return_inverse=True)
+        out[bad] = _hidden_factors_shapely(x[rows], nx[rows], local.ravel(), source[rows], source_normal[rows],
+                                           occluder[rows], occluder_normal[rows], tol)
+    return out
+
+
+def _hidden_factors_shapely(x, nx, group, source, source_normal, occluder, occluder_normal, tol):
+    """:func:`hidden_factors` with every group of two or more hidden polygons united by shapely."""
     from ._exact_kernel import hidden_rows
 
     n_groups = int(group.max()) + 1 if len(group) else 0

@@ -88,6 +88,92 @@ def point_factors(x, nx, polys, counts):
     return out
 
 
+@njit(cache=True)
+def _hidden_polygon(xr, src, ns, sn, occ, ms, on, tol, a, b, s1, s2):
+    """Part of the source src[:ns] hidden from xr by the convex occluder occ[:ms], into s1.
+
+    Returns its vertex count (0: nothing hidden). a, b: scratch (ms + 3, 3); s1, s2: (ns + ms + 3, 3).
+    """
+    cx = 0.0
+    cy = 0.0
+    cz = 0.0
+    for k in range(ns):
+        cx += src[k, 0]
+        cy += src[k, 1]
+        cz += src[k, 2]
+    cx /= ns
+    cy /= ns
+    cz /= ns
+    side = (xr[0] - cx) * sn[0] + (xr[1] - cy) * sn[1] + (xr[2] - cz) * sn[2]
+    flip = -1.0 if side < 0 else 1.0
+    px, py, pz = sn[0] * flip, sn[1] * flip, sn[2] * flip
+    dx = abs(side)
+    if dx <= tol:
+        return 0
+    # apex in the occluder's plane: the cone is flat
+    ox = 0.0
+    oy = 0.0
+    oz = 0.0
+    for k in range(ms):
+        ox += occ[k, 0]
+        oy += occ[k, 1]
+        oz += occ[k, 2]
+    ox /= ms
+    oy /= ms
+    oz /= ms
+    if abs((xr[0] - ox) * on[0] + (xr[1] - oy) * on[1] + (xr[2] - oz) * on[2]) <= tol:
+        return 0
+    off = -(px * cx + py * cy + pz * cz)
+    n1 = _clip(occ, ms, a, px, py, pz, off)
+    n2 = _clip(a, n1, b, -px, -py, -pz, dx - off)
+    if n2 < 3:
+        return 0
+    ix = 0.0
+    iy = 0.0
+    iz = 0.0
+    for k in range(n2):
+        ix += b[k, 0]
+        iy += b[k, 1]
+        iz += b[k, 2]
+    ix = ix / n2 - xr[0]
+    iy = iy / n2 - xr[1]
+    iz = iz / n2 - xr[2]
+    # source into s1
+    for k in range(ns):
+        s1[k, 0] = src[k, 0]
+        s1[k, 1] = src[k, 1]
+        s1[k, 2] = src[k, 2]
+    m = ns
+    flat = True
+    for e in range(n2):
+        e2 = e + 1 if e + 1 < n2 else 0
+        ux = b[e, 0] - xr[0]
+        uy = b[e, 1] - xr[1]
+        uz = b[e, 2] - xr[2]
+        vx = b[e2, 0] - xr[0]
+        vy = b[e2, 1] - xr[1]
+        vz = b[e2, 2] - xr[2]
+        mx = uy * vz - uz * vy
+        my = uz * vx - ux * vz
+        mz = ux * vy - uy * vx
+        norm = math.sqrt(mx * mx + my * my + mz * mz)
+        if norm <= 1e-14 * (ux * ux + uy * uy + uz * uz + vx * vx + vy * vy + vz * vz):
+            continue  # zero-length edge
+        if mx * ix + my * iy + mz * iz < 0:
+            mx, my, mz = -mx, -my, -mz
+        flat = False
+        m = _clip(s1, m, s2, mx, my, mz, -(mx * xr[0] + my * xr[1] + mz * xr[2]))
+        for k in range(m):
+            s1[k, 0] = s2[k, 0]
+            s1[k, 1] = s2[k, 1]
+            s1[k, 2] = s2[k, 2]
+        if m < 3:
+            break
+    if flat or m < 3:
+        return 0
+    return m
+
+
 @njit(cache=True, parallel=True)
 def hidden_rows(x, nx, source, source_normal, occluder, occluder_normal, tol, keep_polygons):
     """Hidden polygon and its form factor for each row.
@@ -99,7 +185,8 @@ def hidden_rows(x, nx, source, source_normal, occluder, occluder_normal, tol, ke
     """
     r = x.shape[0]
     ms = occluder.shape[1]
-    cap = source.shape[1] + ms + 3
+    ns = source.shape[1]
+    cap = ns + ms + 3
     factor = np.zeros(r)
     polys = np.zeros((r if keep_polygons else 1, cap, 3))
     counts = np.zeros(r, np.int64)
@@ -108,88 +195,11 @@ def hidden_rows(x, nx, source, source_normal, occluder, occluder_normal, tol, ke
         b = np.empty((ms + 3, 3))
         s1 = np.empty((cap, 3))
         s2 = np.empty((cap, 3))
-        xr = x[row]
-        sn = source_normal[row]
-        cx = 0.0
-        cy = 0.0
-        cz = 0.0
-        ns = source.shape[1]
-        for k in range(ns):
-            cx += source[row, k, 0]
-            cy += source[row, k, 1]
-            cz += source[row, k, 2]
-        cx /= ns
-        cy /= ns
-        cz /= ns
-        side = (xr[0] - cx) * sn[0] + (xr[1] - cy) * sn[1] + (xr[2] - cz) * sn[2]
-        flip = -1.0 if side < 0 else 1.0
-        px, py, pz = sn[0] * flip, sn[1] * flip, sn[2] * flip
-        dx = abs(side)
-        if dx <= tol:
+        m = _hidden_polygon(x[row], source[row], ns, source_normal[row], occluder[row], ms, occluder_normal[row],
+                            tol, a, b, s1, s2)
+        if m < 3:
             continue
-        # apex in the occluder's plane: the cone is flat
-        on = occluder_normal[row]
-        ox = 0.0
-        oy = 0.0
-        oz = 0.0
-        for k in range(ms):
-            ox += occluder[row, k, 0]
-            oy += occluder[row, k, 1]
-            oz += occluder[row, k, 2]
-        ox /= ms
-        oy /= ms
-        oz /= ms
-        if abs((xr[0] - ox) * on[0] + (xr[1] - oy) * on[1] + (xr[2] - oz) * on[2]) <= tol:
-            continue
-        off = -(px * cx + py * cy + pz * cz)
-        n1 = _clip(occluder[row], ms, a, px, py, pz, off)
-        n2 = _clip(a, n1, b, -px, -py, -pz, dx - off)
-        if n2 < 3:
-            continue
-        ix = 0.0
-        iy = 0.0
-        iz = 0.0
-        for k in range(n2):
-            ix += b[k, 0]
-            iy += b[k, 1]
-            iz += b[k, 2]
-        ix = ix / n2 - xr[0]
-        iy = iy / n2 - xr[1]
-        iz = iz / n2 - xr[2]
-        # source into s1
-        for k in range(ns):
-            s1[k, 0] = source[row, k, 0]
-            s1[k, 1] = source[row, k, 1]
-            s1[k, 2] = source[row, k, 2]
-        m = ns
-        flat = True
-        for e in range(n2):
-            e2 = e + 1 if e + 1 < n2 else 0
-            ux = b[e, 0] - xr[0]
-            uy = b[e, 1] - xr[1]
-            uz = b[e, 2] - xr[2]
-            vx = b[e2, 0] - xr[0]
-            vy = b[e2, 1] - xr[1]
-            vz = b[e2, 2] - xr[2]
-            mx = uy * vz - uz * vy
-            my = uz * vx - ux * vz
-            mz = ux * vy - uy * vx
-            norm = math.sqrt(mx * mx + my * my + mz * mz)
-            if norm <= 1e-14 * (ux * ux + uy * uy + uz * uz + vx * vx + vy * vy + vz * vz):
-                continue  # zero-length edge
-            if mx * ix + my * iy + mz * iz < 0:
-                mx, my, mz = -mx, -my, -mz
-            flat = False
-            m = _clip(s1, m, s2, mx, my, mz, -(mx * xr[0] + my * xr[1] + mz * xr[2]))
-            for k in range(m):
-                s1[k, 0] = s2[k, 0]
-                s1[k, 1] = s2[k, 1]
-                s1[k, 2] = s2[k, 2]
-            if m < 3:
-                break
-        if flat or m < 3:
-            continue
-        factor[row] = _lambert(xr, nx[row], s1, m, s2)
+        factor[row] = _lambert(x[row], nx[row], s1, m, s2)
         counts[row] = m
         if keep_polygons:
             for k in range(cap):
@@ -200,6 +210,289 @@ def hidden_rows(x, nx, source, source_normal, occluder, occluder_normal, tol, ke
     return factor, polys, counts
 
 
+# Relative length (to the polygon's size) below which an edge of a hidden polygon gives no
+# clipping line when two hidden polygons are intersected (its direction would be rounding noise).
+_EDGE_REL = 1e-9
+
+
+@njit(cache=True)
+def _intersect(pa, na, pb, nb, sn, out, sa, sb):
+    """Convex pa[:na] intersected with convex pb[:nb] (both in the plane with normal sn), into out."""
+    bx = 0.0
+    by = 0.0
+    bz = 0.0
+    for k in range(nb):
+        bx += pb[k, 0]
+        by += pb[k, 1]
+        bz += pb[k, 2]
+    bx /= nb
+    by /= nb
+    bz /= nb
+    size = 0.0
+    for k in range(nb):
+        size = max(size, abs(pb[k, 0] - bx) + abs(pb[k, 1] - by) + abs(pb[k, 2] - bz))
+    for k in range(na):
+        sa[k, 0] = pa[k, 0]
+        sa[k, 1] = pa[k, 1]
+        sa[k, 2] = pa[k, 2]
+    m = na
+    for e in range(nb):
+        e2 = e + 1 if e + 1 < nb else 0
+        ex = pb[e2, 0] - pb[e, 0]
+        ey = pb[e2, 1] - pb[e, 1]
+        ez = pb[e2, 2] - pb[e, 2]
+        if abs(ex) + abs(ey) + abs(ez) <= _EDGE_REL * size:
+            continue
+        mx = sn[1] * ez - sn[2] * ey
+        my = sn[2] * ex - sn[0] * ez
+        mz = sn[0] * ey - sn[1] * ex
+        if mx * (bx - pb[e, 0]) + my * (by - pb[e, 1]) + mz * (bz - pb[e, 2]) < 0:
+            mx, my, mz = -mx, -my, -mz
+        m = _clip(sa, m, sb, mx, my, mz, -(mx * pb[e, 0] + my * pb[e, 1] + mz * pb[e, 2]))
+        if m < 3:
+            return 0
+        for k in range(m):
+            sa[k, 0] = sb[k, 0]
+            sa[k, 1] = sb[k, 1]
+            sa[k, 2] = sb[k, 2]
+    for k in range(m):
+        out[k, 0] = sa[k, 0]
+        out[k, 1] = sa[k, 1]
+        out[k, 2] = sa[k, 2]
+    return m
+
+
+@njit(cache=True)
+def _union_factor(x, nx, hp, hn, n_polys, sn, levels, lcount, nxt, sa, sb):
+    """Form factor from x to the union of the convex polygons hp[k, :hn[k]] (one plane), k < n_polys.
+
+    Inclusion-exclusion over the intersections (convex polygons), depth first; a branch stops
+    where the intersection is empty or out of x's sight (its subsets add nothing either).
+    """
+    total = 0.0
+    top = 0
+    nxt[0] = 0
+    while top >= 0:
+        k = nxt[top]
+        if k >= n_polys:
+            top -= 1
+            continue
+        nxt[top] = k + 1
+        if top == 0:
+            n = hn[k]
+            for v in range(n):
+                levels[1, v, 0] = hp[k, v, 0]
+                levels[1, v, 1] = hp[k, v, 1]
+                levels[1, v, 2] = hp[k, v, 2]
+        else:
+            n = _intersect(levels[top], lcount[top], hp[k], hn[k], sn, levels[top + 1], sa, sb)
+        if n < 3:
+            continue
+        f = _lambert(x, nx, levels[top + 1], n, sa)
+        if f <= 0.0:
+            continue
+        total += f if top % 2 == 0 else -f
+        lcount[top + 1] = n
+        top += 1
+        nxt[top] = k + 1
+    return max(total, 0.0)
+
+
+@njit(cache=True)
+def _point_hidden(x, nx, src, sn, occ, t0, t1, opolys, onormal, tol, max_union, a, b, s1, s2, hp, hn, levels,
+                  lcount, nxt, sa, sb):
+    """Form factor from x of the part of src hidden by the occluders opolys[occ[t0:t1]].
+
+    Returns (factor, ok): ok is False when more than max_union occluders hide something (the
+    caller unites those with shapely).
+    """
+    ms = opolys.shape[1]
+    ns = src.shape[0]
+    count = 0
+    single = 0.0
+    for t in range(t0, t1):
+        k = occ[t]
+        m = _hidden_polygon(x, src, ns, sn, opolys[k], ms, onormal[k], tol, a, b, s1, s2)
+        if m < 3:
+            continue
+        f = _lambert(x, nx, s1, m, s2)
+        if f <= 0.0:
+            continue
+        if count < max_union:
+            for v in range(m):
+                hp[count, v, 0] = s1[v, 0]
+                hp[count, v, 1] = s1[v, 1]
+                hp[count, v, 2] = s1[v, 2]
+            hn[count] = m
+        single = f
+        count += 1
+    if count <= 1:
+        return single, True
+    if count > max_union:
+        return 0.0, False
+    return _union_factor(x, nx, hp, hn, count, sn, levels, lcount, nxt, sa, sb), True
+
+
+@njit(cache=True)
+def _hidden_block(s, e, x, nx, source, source_normal, occ, starts, opolys, onormal, tol, max_union, factor, ok):
+    """Groups s..e-1 of :func:`hidden_groups`."""
+    ms = opolys.shape[1]
+    ns = source.shape[1]
+    cap = ns + ms + 3
+    lcap = 2 * (max_union + 1) * cap + 8
+    a = np.empty((ms + 3, 3))
+    b = np.empty((ms + 3, 3))
+    s1 = np.empty((cap, 3))
+    s2 = np.empty((cap, 3))
+    hp = np.empty((max_union, cap, 3))
+    hn = np.empty(max_union, np.int64)
+    levels = np.empty((max_union + 1, lcap, 3))
+    lcount = np.empty(max_union + 1, np.int64)
+    nxt = np.empty(max_union + 1, np.int64)
+    sa = np.empty((lcap + 2, 3))
+    sb = np.empty((lcap + 2, 3))
+    for grp in range(s, e):
+        t0, t1 = starts[grp], starts[grp + 1]
+        if t1 == t0:
+            continue
+        factor[grp], ok[grp] = _point_hidden(x[t0], nx[t0], source[t0], source_normal[t0], occ, t0, t1, opolys,
+                                             onormal, tol, max_union, a, b, s1, s2, hp, hn, levels, lcount, nxt,
+                                             sa, sb)
+
+
+@njit(cache=True, parallel=True)
+def hidden_groups(x, nx, source, source_normal, occ, starts, opolys, onormal, tol, max_union):
+    """Hidden form factor per group of rows ``starts[g]:starts[g + 1]`` (sharing x, nx and source).
+
+    Row t's occluder is ``opolys[occ[t]]``. Returns factor (g,) and ok (g,) (False: more than
+    max_union occluders hide something; factor is then 0 and left to the caller).
+    """
+    g = starts.shape[0] - 1
+    factor = np.zeros(g)
+    ok = np.ones(g, np.bool_)
+    n_blocks = (g + _GROUP_BLOCK - 1) // _GROUP_BLOCK
+    for blk in prange(n_blocks):
+        _hidden_block(blk * _GROUP_BLOCK, min(g, (blk + 1) * _GROUP_BLOCK), x, nx, source, source_normal, occ, starts,
+                      opolys, onormal, tol, max_union, factor, ok)
+    return factor, ok
+
+
+# Groups (or pairs) per parallel task of the exact-shadow kernels.
+_GROUP_BLOCK = 64
+
+
+@njit(cache=True)
+def _exact_block(s, e, pts, normals, quads, i, j, starts, occ, opolys, onormal, tol, max_union, unocc, hidden, ok):
+    """Pairs s..e-1 of :func:`exact_pairs`."""
+    q = pts.shape[1]
+    ms = opolys.shape[1]
+    ns = quads.shape[1]
+    cap = ns + ms + 3
+    lcap = 2 * (max_union + 1) * cap + 8
+    a = np.empty((ms + 3, 3))
+    b = np.empty((ms + 3, 3))
+    s1 = np.empty((cap, 3))
+    s2 = np.empty((cap, 3))
+    hp = np.empty((max_union, cap, 3))
+    hn = np.empty(max_union, np.int64)
+    levels = np.empty((max_union + 1, lcap, 3))
+    lcount = np.empty(max_union + 1, np.int64)
+    nxt = np.empty(max_union + 1, np.int64)
+    sa = np.empty((lcap + 2, 3))
+    sb = np.empty((lcap + 2, 3))
+    for p in range(s, e):
+        src = quads[j[p]]
+        sn = normals[j[p]]
+        nxp = normals[i[p]]
+        for qa in range(q):
+            xq = pts[i[p], qa]
+            unocc[p, qa] = _lambert(xq, nxp, src, ns, s2)
+            hidden[p, qa], ok[p, qa] = _point_hidden(xq, nxp, src, sn, occ, starts[p], starts[p + 1], opolys,
+                                                     onormal, tol, max_union, a, b, s1, s2, hp, hn, levels,
+                                                     lcount, nxt, sa, sb)
+
+
+@njit(cache=True, parallel=True)
+def exact_pairs(pts, normals, quads, i, j, starts, occ, opolys, onormal, tol, max_union):
+    """Unoccluded and hidden form factors at the receiver points of partly occluded pairs.
+
+    Pair p (receiver i[p], source j[p]) may be blocked by ``opolys[occ[starts[p]:starts[p + 1]]]``;
+    its receiver points are ``pts[i[p]]`` (n, q, 3).
+
+    Returns
+    -------
+    unoccluded, hidden : (m, q) float
+    ok : (m, q) bool
+        False where more than max_union occluders hide something (hidden is then 0).
+    """
+    m = i.shape[0]
+    q = pts.shape[1]
+    unocc = np.zeros((m, q))
+    hidden = np.zeros((m, q))
+    ok = np.ones((m, q), np.bool_)
+    n_blocks = (m + _GROUP_BLOCK - 1) // _GROUP_BLOCK
+    for blk in prange(n_blocks):
+        _exact_block(blk * _GROUP_BLOCK, min(m, (blk + 1) * _GROUP_BLOCK), pts, normals, quads, i, j, starts, occ,
+                     opolys, onormal, tol, max_union, unocc, hidden, ok)
+    return unocc, hidden, ok
+
+
+@njit(cache=True, inline="always")
+def _classify_one(vi, vj, polys, normal, center, inward, kk, tol, si, sj, outside, valid, gi, gj):
+    """FREE (0) / FULL (1) / MAYBE (2) of one (pair, occluder kk).
+
+    si, sj (4,), outside, valid (nv,), gi, gj (4, nv): scratch. The 16 crossing points are
+    tested against the edges through the edge functions at the 8 vertices: g is affine, so
+    g(vi + t (vj - vi)) = g(vi) + t (g(vj) - g(vi)).
+    """
+    nv = polys.shape[1]
+    n0, n1, n2 = normal[kk, 0], normal[kk, 1], normal[kk, 2]
+    c0, c1, c2 = center[kk, 0], center[kk, 1], center[kk, 2]
+    for a in range(4):
+        si[a] = (vi[a, 0] - c0) * n0 + (vi[a, 1] - c1) * n1 + (vi[a, 2] - c2) * n2
+        sj[a] = (vj[a, 0] - c0) * n0 + (vj[a, 1] - c1) * n1 + (vj[a, 2] - c2) * n2
+    imin, imax, jmin, jmax = si.min(), si.max(), sj.min(), sj.max()
+    on_plane = max(abs(imin), abs(imax)) <= tol or max(abs(jmin), abs(jmax)) <= tol
+    pos_i, neg_i = imin >= -tol, imax <= tol
+    pos_j, neg_j = jmin >= -tol, jmax <= tol
+    if on_plane or (pos_i and pos_j) or (neg_i and neg_j):
+        return 0
+    if not ((pos_i and neg_j) or (neg_i and pos_j)):
+        return 2  # a patch straddles the plane
+    n_outside = 0
+    for e in range(nv):
+        valid[e] = inward[kk, e, 0] != 0.0 or inward[kk, e, 1] != 0.0 or inward[kk, e, 2] != 0.0
+        outside[e] = valid[e]
+        if valid[e]:
+            n_outside += 1
+            p0, p1, p2 = polys[kk, e, 0], polys[kk, e, 1], polys[kk, e, 2]
+            w0, w1, w2 = inward[kk, e, 0], inward[kk, e, 1], inward[kk, e, 2]
+            for a in range(4):
+                gi[a, e] = (vi[a, 0] - p0) * w0 + (vi[a, 1] - p1) * w1 + (vi[a, 2] - p2) * w2
+                gj[a, e] = (vj[a, 0] - p0) * w0 + (vj[a, 1] - p1) * w1 + (vj[a, 2] - p2) * w2
+    inside_all = True
+    for a in range(4):
+        for b in range(4):
+            den = si[a] - sj[b]
+            if abs(den) <= tol:
+                return 2  # a segment runs (nearly) in the plane: neither inside nor separated
+            tt = si[a] / den
+            for e in range(nv):
+                if not valid[e]:
+                    continue
+                g = gi[a, e] + tt * (gj[b, e] - gi[a, e])
+                if g >= -tol and outside[e]:
+                    outside[e] = False
+                    n_outside -= 1
+                if g <= tol:
+                    inside_all = False
+            if n_outside == 0 and not inside_all:
+                return 2
+    if n_outside > 0:
+        return 0
+    return 1 if inside_all else 2
+
+
 @njit(cache=True, parallel=True)
 def classify_rows(vi, vj, polys, normal, center, inward, k, tol):
     """FREE (0) / FULL (1) / MAYBE (2) for rows (patch vertices vi, vj (t, 4, 3); occluder k)."""
@@ -207,56 +500,131 @@ def classify_rows(vi, vj, polys, normal, center, inward, k, tol):
     out = np.full(t, 2, np.int8)
     nv = polys.shape[1]
     for row in prange(t):
-        kk = k[row]
-        n0, n1, n2 = normal[kk, 0], normal[kk, 1], normal[kk, 2]
-        c0, c1, c2 = center[kk, 0], center[kk, 1], center[kk, 2]
         si = np.empty(4)
         sj = np.empty(4)
-        for a in range(4):
-            si[a] = (vi[row, a, 0] - c0) * n0 + (vi[row, a, 1] - c1) * n1 + (vi[row, a, 2] - c2) * n2
-            sj[a] = (vj[row, a, 0] - c0) * n0 + (vj[row, a, 1] - c1) * n1 + (vj[row, a, 2] - c2) * n2
-        imin, imax, jmin, jmax = si.min(), si.max(), sj.min(), sj.max()
-        on_plane = max(abs(imin), abs(imax)) <= tol or max(abs(jmin), abs(jmax)) <= tol
-        pos_i, neg_i = imin >= -tol, imax <= tol
-        pos_j, neg_j = jmin >= -tol, jmax <= tol
-        if on_plane or (pos_i and pos_j) or (neg_i and neg_j):
-            out[row] = 0
-            continue
-        if not ((pos_i and neg_j) or (neg_i and pos_j)):
-            continue  # a patch straddles the plane
-        inside_all = True
         outside = np.zeros(nv, np.bool_)
         valid = np.zeros(nv, np.bool_)
-        for e in range(nv):
-            valid[e] = inward[kk, e, 0] != 0.0 or inward[kk, e, 1] != 0.0 or inward[kk, e, 2] != 0.0
-            outside[e] = valid[e]
-        for a in range(4):
-            for b in range(4):
-                den = si[a] - sj[b]
-                if abs(den) <= tol:
-                    inside_all = False
-                    for e in range(nv):
-                        outside[e] = False
-                    continue
-                tt = si[a] / den
-                m0 = vi[row, a, 0] + tt * (vj[row, b, 0] - vi[row, a, 0])
-                m1 = vi[row, a, 1] + tt * (vj[row, b, 1] - vi[row, a, 1])
-                m2 = vi[row, a, 2] + tt * (vj[row, b, 2] - vi[row, a, 2])
-                for e in range(nv):
-                    if not valid[e]:
-                        continue
-                    g = ((m0 - polys[kk, e, 0]) * inward[kk, e, 0] + (m1 - polys[kk, e, 1]) * inward[kk, e, 1]
-                         + (m2 - polys[kk, e, 2]) * inward[kk, e, 2])
-                    if g >= -tol:
-                        outside[e] = False
-                    if g <= tol:
-                        inside_all = False
-        separated = False
-        for e in range(nv):
-            if outside[e]:
-                separated = True
-        if separated:
-            out[row] = 0
-        elif inside_all:
-            out[row] = 1
+        gi = np.empty((4, nv))
+        gj = np.empty((4, nv))
+        out[row] = _classify_one(vi[row], vj[row], polys, normal, center, inward, k[row], tol, si, sj,
+                                 outside, valid, gi, gj)
     return out
+
+
+# Pairs handed to one parallel task of the pair classification (scratch is allocated per task).
+_PAIR_BLOCK = 256
+
+
+@njit(cache=True, inline="always")
+def _meets(lo, hi, blo, bhi, pad):
+    return (lo[0] <= bhi[0] + pad and lo[1] <= bhi[1] + pad and lo[2] <= bhi[2] + pad
+            and hi[0] >= blo[0] - pad and hi[1] >= blo[1] - pad and hi[2] >= blo[2] - pad)
+
+
+@njit(cache=True, inline="always")
+def _classify_pair(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, node_hi, node_left, node_right,
+                   node_start, node_count, order, pad, tol, out_occ, stack, lo, hi, si, sj, outside, valid, gi, gj):
+    """Walk the BVH for one pair; write its MAYBE occluders to out_occ (as many as fit).
+
+    Returns (status, number of MAYBE occluders); a FULL pair stops at its first full occluder.
+    """
+    for c in range(3):
+        lo[c] = min(vi[:, c].min(), vj[:, c].min())
+        hi[c] = max(vi[:, c].max(), vj[:, c].max())
+    n_maybe = 0
+    top = 0
+    stack[0] = 0
+    while top >= 0:
+        node = stack[top]
+        top -= 1
+        if not _meets(lo, hi, node_lo[node], node_hi[node], pad):
+            continue
+        if node_left[node] >= 0:
+            top += 1
+            stack[top] = node_right[node]
+            top += 1
+            stack[top] = node_left[node]
+            continue
+        for s in range(node_start[node], node_start[node] + node_count[node]):
+            kk = order[s]
+            if not _meets(lo, hi, olo[kk], ohi[kk], pad):
+                continue
+            state = _classify_one(vi, vj, polys, normal, center, inward, kk, tol, si, sj, outside, valid, gi, gj)
+            if state == 1:
+                return 1, 0
+            if state == 2:
+                if n_maybe < out_occ.shape[0]:
+                    out_occ[n_maybe] = kk
+                n_maybe += 1
+    return (2 if n_maybe else 0), n_maybe
+
+
+@njit(cache=True)
+def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, ohi, node_lo, node_hi, node_left,
+                    node_right, node_start, node_count, order, pad, tol, status, count, first, starts, occ):
+    """Pairs s..e-1 of :func:`classify_pairs`: first pass (``starts`` empty) or second pass."""
+    nv = polys.shape[1]
+    stack = np.empty(2 * node_lo.shape[0] + 2, np.int64)
+    lo = np.empty(3)
+    hi = np.empty(3)
+    si = np.empty(4)
+    sj = np.empty(4)
+    outside = np.zeros(nv, np.bool_)
+    valid = np.zeros(nv, np.bool_)
+    gi = np.empty((4, nv))
+    gj = np.empty((4, nv))
+    width = first.shape[1]
+    second = starts.shape[0] > 0
+    for p in range(s, e):
+        if second:
+            n = count[p]
+            if n <= width:
+                for t in range(n):
+                    occ[starts[p] + t] = first[p, t]
+                continue
+            out = occ[starts[p]:starts[p + 1]]
+        else:
+            out = first[p]
+        st, n = _classify_pair(va[ia[p]], vb[ib[p]], polys, normal, center, inward, olo, ohi, node_lo, node_hi,
+                               node_left, node_right, node_start, node_count, order, pad, tol, out, stack, lo, hi,
+                               si, sj, outside, valid, gi, gj)
+        if not second:
+            status[p] = st
+            count[p] = n
+
+
+@njit(cache=True, parallel=True)
+def classify_pairs(va, ia, vb, ib, polys, normal, center, inward, olo, ohi, node_lo, node_hi, node_left,
+                   node_right, node_start, node_count, order, pad, tol):
+    """Classify pairs (va[ia[p]], vb[ib[p]]) against every occluder whose box meets theirs.
+
+    The pair's box (vertex min/max) is walked down the occluders' BVH (boxes padded by ``pad``);
+    each occluder reached is classified by :func:`_classify_one`.
+
+    Returns
+    -------
+    status : (m,) int8
+        0 free, 1 full (some occluder blocks every segment), 2 maybe.
+    starts : (m + 1,) int64
+        The MAYBE occluders of pair p are ``occ[starts[p]:starts[p + 1]]`` (none for full pairs).
+    occ : (t,) int64
+    """
+    m = ia.shape[0]
+    status = np.zeros(m, np.int8)
+    count = np.zeros(m, np.int64)
+    first = np.empty((m, 8), np.int64)  # the first MAYBE occluders; pairs with more walk again
+    n_blocks = (m + _PAIR_BLOCK - 1) // _PAIR_BLOCK
+    none = np.zeros(0, np.int64)
+    for blk in prange(n_blocks):
+        _classify_block(blk * _PAIR_BLOCK, min(m, (blk + 1) * _PAIR_BLOCK), va, ia, vb, ib, polys, normal, center,
+                        inward, olo, ohi, node_lo, node_hi, node_left, node_right, node_start, node_count, order,
+                        pad, tol, status, count, first, none, none)
+    starts = np.zeros(m + 1, np.int64)
+    for p in range(m):
+        starts[p + 1] = starts[p] + count[p]
+    occ = np.empty(starts[m], np.int64)
+    for blk in prange(n_blocks):
+        _classify_block(blk * _PAIR_BLOCK, min(m, (blk + 1) * _PAIR_BLOCK), va, ia, vb, ib, polys, normal, center,
+                        inward, olo, ohi, node_lo, node_hi, node_left, node_right, node_start, node_count, order,
+                        pad, tol, status, count, first, starts, occ)
+    return status, starts, occ
