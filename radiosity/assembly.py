@@ -23,6 +23,10 @@ __all__ = ["FillSettings", "FillStats", "candidate_pairs", "unoccluded_factors",
 
 VISIBILITY_MODES = ("auto", "rays", "exact")
 
+# Directed pairs per block of the fill (a block's pairs (i, j > i) and their mirrors): bounds the
+# per-pair temporaries of form factors and visibility (a few hundred bytes each).
+FILL_PAIRS = 2_000_000
+
 
 @dataclass(frozen=True)
 class FillSettings:
@@ -119,12 +123,41 @@ def unoccluded_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndar
                         max_points=_tol.PAIR_MAX_POINTS)
 
 
-def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettings, stats: FillStats) -> None:
-    """Multiply the unoccluded factors f (in place) by each pair's visible fraction."""
+def _classify_both_ways(f, i, j, visibility, half):
+    """Classify pairs t < half once for both directions (pair t + half is its mirror (j, i)).
+
+    Whether an occluder blocks all, some or none of the segments between two patches does not
+    depend on which one receives, so the mirror takes the same status and occluders.
+    """
+    from .visibility import FREE
+
+    need = np.flatnonzero((f[:half] > 0) | (f[half:] > 0))
+    status = np.full(len(f), FREE, np.int8)
+    st, rows, occ = visibility.classify(i[need], j[need])
+    status[need] = st
+    status[need + half] = st
+    rows = need[rows]
+    return status, np.concatenate([rows, rows + half]), np.concatenate([occ, occ])
+
+
+def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettings, stats: FillStats, *,
+                      half: int | None = None) -> None:
+    """Multiply the unoccluded factors f (in place) by each pair's visible fraction.
+
+    ``half``: the pairs are ``(i, j)`` for t < half and their mirrors ``(j, i)`` after them,
+    classified once for both.
+    """
     from .visibility import FULL, MAYBE
 
     nz = np.flatnonzero(f > 0)
-    status, rows, occ = visibility.classify(i[nz], j[nz])
+    if half is None:
+        status, rows, occ = visibility.classify(i[nz], j[nz])
+    else:
+        status, rows, occ = _classify_both_ways(f, i, j, visibility, half)
+        local = np.full(len(f), -1)
+        local[nz] = np.arange(len(nz))
+        keep = local[rows] >= 0
+        status, rows, occ = status[nz], local[rows[keep]], occ[keep]
     blocked = nz[status == FULL]
     f[blocked] = 0.0
     stats.n_blocked_pairs += len(blocked)
@@ -140,16 +173,20 @@ def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettin
         exact = f[nz[part]] / settings.visibility_max_samples > settings.visibility_rtol
     pi, pj = i[nz[part]], j[nz[part]]
     frac = np.ones(len(part))
+    local = np.full(len(nz), -1)
+    local[part] = np.arange(len(part))
     if (~exact).any():
         sel = np.flatnonzero(~exact)
+        where = np.full(len(part), -1)
+        where[sel] = np.arange(len(sel))
+        keep = where[local[rows]] >= 0
         frac[sel] = visibility.ray_fraction(pi[sel], pj[sel], settings.visibility_samples,
-                                            settings.visibility_max_samples)
+                                            settings.visibility_max_samples, rows=where[local[rows[keep]]],
+                                            occ=occ[keep])
     if exact.any():
         stats.n_exact_pairs += int(exact.sum())
         # the same receiver points as the unoccluded factor, so F = sum_q w_q F_visible(x_q)
         near = _is_near(quads, centroid, pi, pj, settings)
-        local = np.full(len(nz), -1)
-        local[part] = np.arange(len(part))
         for mask, order in ((exact & near, settings.near_order), (exact & ~near, 1)):
             if not mask.any():
                 continue
@@ -161,24 +198,46 @@ def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettin
     f[nz[part]] *= frac
 
 
-def assemble(quads, normals, centroid, area, visibility, settings: FillSettings, progress=None
-             ) -> tuple[sp.csr_matrix, FillStats]:
-    """The sparse view-factor matrix F (n, n) with occlusion, and fill statistics."""
+def _row_blocks(n: int, pairs_per_block: int) -> list[tuple[int, int]]:
+    """Row ranges holding about ``pairs_per_block`` pairs (i, j > i) each."""
+    upper = np.cumsum(np.arange(n, 0, -1))  # pairs (i, j > i) in rows 0..i
+    block = upper // max(1, pairs_per_block)
+    edges = np.r_[0, np.flatnonzero(np.diff(block)) + 1, n]
+    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+
+
+def assemble(quads, normals, centroid, area, visibility, settings: FillSettings, progress=None, *,
+             active: np.ndarray | None = None) -> tuple[sp.csr_matrix, FillStats]:
+    """The sparse view-factor matrix F (n, n) with occlusion, and fill statistics.
+
+    Rows are filled in blocks; a block holds the pairs (i, j > i) of its rows and their mirrors
+    (j, i), so each unordered pair is classified for occlusion once.
+
+    ``active`` (n,) bool, default all: pairs with an inactive patch at either end (hidden or
+    obstruction patches, whose rows and columns the solver zeroes) are left out of F entirely:
+    no form factor, no visibility. Inactive patches still block.
+    """
     n = len(quads)
     stats = FillStats()
-    rows_per_block = max(1, min(n, 2_000_000 // max(n, 1)))
     rays_before = visibility.n_rays if visibility is not None else 0
     parts_i, parts_j, parts_v = [], [], []
-    for start in range(0, n, rows_per_block):
-        rows = np.arange(start, min(n, start + rows_per_block))
+    for start, stop in _row_blocks(n, FILL_PAIRS // 2):
+        rows = np.arange(start, stop)
+        if active is not None:
+            rows = rows[active[rows]]
         i, j = candidate_pairs(quads, normals, centroid, rows)
+        keep = j > i
+        if active is not None:
+            keep &= active[j]
+        half = int(keep.sum())
+        i, j = np.concatenate([i[keep], j[keep]]), np.concatenate([j[keep], i[keep]])
         if len(i):
             t0 = time.perf_counter()
             f = unoccluded_factors(quads, normals, centroid, area, i, j, settings)
             t1 = time.perf_counter()
             stats.seconds_formfactors += t1 - t0
             if visibility is not None:
-                _apply_visibility(f, quads, centroid, i, j, visibility, settings, stats)
+                _apply_visibility(f, quads, centroid, i, j, visibility, settings, stats, half=half)
                 stats.seconds_visibility += time.perf_counter() - t1
             keep = f > _tol.DROP_FACTOR
             stats.dropped_mass += float((f[~keep] * area[i[~keep]]).sum())
@@ -187,7 +246,7 @@ def assemble(quads, normals, centroid, area, visibility, settings: FillSettings,
             parts_j.append(j[keep])
             parts_v.append(f[keep])
         if progress is not None:
-            progress(len(rows))
+            progress(stop - start)
     if visibility is not None:
         stats.n_rays = visibility.n_rays - rays_before
     if parts_i:

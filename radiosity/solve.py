@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import time
 from dataclasses import dataclass, field
 
@@ -66,8 +67,10 @@ def prepare(scene: Scene, options: Options) -> Prepared:
     settings = _fill_settings(options)
     _memory.check_fill(cut.n_patches, patch_size=cut.max_patch_size)
     cache = FormFactorCache.default() if options.cache else None
+    inactive = _inactive(cut)
+    key = _fill_key(cut.geometry_hash, inactive)
     if cache is not None:
-        hit = cache.load(cut.geometry_hash, settings)
+        hit = cache.load(key, settings)
         if hit is not None:
             F, stats = hit
             timings["form factors"] = 0.0
@@ -79,13 +82,13 @@ def prepare(scene: Scene, options: Options) -> Prepared:
     update, close = _progress_bar(options.progress, cut.n_patches, "form factors")
     try:
         F, stats = assemble(cut.patch_quads, cut.patch_normal, cut.patch_centroid, cut.patch_area,
-                            visibility, settings, progress=update)
+                            visibility, settings, progress=update, active=~inactive)
     finally:
         close()
     timings["form factors"] = stats.seconds_formfactors
     timings["visibility"] = stats.seconds_visibility
     if cache is not None:
-        cache.store(cut.geometry_hash, settings, F, stats)
+        cache.store(key, settings, F, stats)
     return Prepared(cut, F, stats, timings)
 
 
@@ -127,6 +130,14 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     balance = energy_balance(F, cut.patch_area, cut.reflectance, cut.emission, radiosity)
     return Solution(scene=cut, radiosity=radiosity, F=F, options=options, timings=timings,
                     fill=prepared.stats, solver=report, energy=balance, cache_hit=prepared.cache_hit)
+
+
+def _fill_key(geometry_hash: str, inactive: np.ndarray) -> str:
+    """Cache key of a fill: the fill leaves out pairs of inactive patches, so they are part of it."""
+    if not inactive.any():
+        return geometry_hash
+    digest = hashlib.sha256(geometry_hash.encode() + np.packbits(inactive).tobytes())
+    return digest.hexdigest()[:32]
 
 
 def _inactive(scene: Scene) -> np.ndarray:

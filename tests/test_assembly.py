@@ -177,3 +177,48 @@ def test_fill_settings_validate():
         FillSettings(visibility_samples=0)
     with pytest.raises(ValueError, match="visibility_rtol"):
         FillSettings(visibility_rtol=-1.0)
+
+
+@pytest.mark.parametrize("mode", ["exact", "rays"])
+def test_fill_classifies_each_pair_once_for_both_directions(mode):
+    """assemble classifies (i, j) and (j, i) together; every entry is still f_ij x fraction(i, j)."""
+    from test_visibility import boxes_scene
+
+    quads, groups = boxes_scene()
+    settings = FillSettings(near_order=3, far_separation=1e9, visibility=mode, visibility_samples=2,
+                            visibility_max_samples=4)
+    normals = polygon_normals(quads)
+    centroid, area = centroids_and_areas(quads)
+    vis = Visibility(quads, normals, groups, 1.8, samples=2, max_samples=4)
+    F, stats = assemble(quads, normals, centroid, area, vis, settings)
+    assert stats.n_traced_pairs > 0 and stats.n_blocked_pairs > 0
+    from radiosity.assembly import candidate_pairs, unoccluded_factors
+
+    i, j = candidate_pairs(quads, normals, centroid, np.arange(len(quads)))
+
+    f = unoccluded_factors(quads, normals, centroid, area, i, j, settings)
+    fresh = Visibility(quads, normals, groups, 1.8, samples=2, max_samples=4)
+    expected = f * fresh.fraction(i, j, exact=mode == "exact", order=3)
+    np.testing.assert_allclose(F.toarray()[i, j], np.where(expected > 1e-12, expected, 0.0), rtol=1e-12, atol=1e-15)
+    assert F.nnz == np.count_nonzero(expected > 1e-12)
+
+
+def test_inactive_patches_are_left_out_and_nothing_else_changes():
+    from test_visibility import boxes_scene
+
+    quads, groups = boxes_scene()
+    normals = polygon_normals(quads)
+    centroid, area = centroids_and_areas(quads)
+    settings = FillSettings(visibility="auto")
+    active = np.ones(len(quads), bool)
+    active[[3, 40, 70, 81]] = False  # floor, ceiling and box patches
+
+    def run(**kw):
+        vis = Visibility(quads, normals, groups, 1.8)
+        return assemble(quads, normals, centroid, area, vis, settings, **kw)
+
+    full, stats_full = run()
+    part, stats_part = run(active=active)
+    expected = full.toarray() * active[:, None] * active[None, :]
+    np.testing.assert_array_equal(part.toarray(), expected)
+    assert stats_part.n_pairs < stats_full.n_pairs
