@@ -1,5 +1,7 @@
 """Occluded view factors: two parallel unit squares 1 apart, a centred 0.5 x 0.5 blocker midway.
 
+Times are wall and CPU (``time.process_time``, all threads) seconds of the whole fill.
+
 Each plate is cut into n x n patches (n = 8, 16, 32; n = 32 is 1,048,576 plate-to-plate pairs);
 the blocker is one patch. The measured quantity is the plate-to-plate total
 ``sum_ij A_i F_ij / A_plate`` against the reference 0.0995062946 (FIELD_NOTES.md), for our
@@ -57,17 +59,17 @@ def plates(n: int) -> tuple[np.ndarray, np.ndarray]:
 def time_ours(n: int, mode: str) -> dict:
     quads, groups = plates(n)
     settings = MODES[mode]
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     normals = polygon_normals(quads)
     centroid, area = centroids_and_areas(quads)
     vis = Visibility(quads, normals, groups, float(np.sqrt(3)), samples=settings.visibility_samples,
                      max_samples=settings.visibility_max_samples)
     F, stats = assemble(quads, normals, centroid, area, vis, settings)
-    seconds = time.perf_counter() - t0
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     m = n * n
     total = float(F[:m, m:2 * m].multiply(area[:m, None]).sum())
     back = float(F[m:2 * m, :m].multiply(area[m:2 * m, None]).sum())
-    return {"n": n, "method": f"radiosity {mode}", "seconds": seconds, "total": total,
+    return {"n": n, "method": f"radiosity {mode}", "seconds": seconds, "cpu_seconds": cpu, "total": total,
             "error": total - REFERENCE, "reciprocity": back - total, "pairs": stats.n_pairs,
             "blocked_pairs": stats.n_blocked_pairs, "partial_pairs": stats.n_traced_pairs, "rays": stats.n_rays,
             "seconds_formfactors": stats.seconds_formfactors, "seconds_visibility": stats.seconds_visibility}
@@ -87,13 +89,13 @@ def time_pyviewfactor(n: int) -> dict:
 
     mesh = polydata(quads[:2 * m])
     blocker = polydata(quads[2 * m:]).triangulate()
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     F = np.asarray(pvf.compute_viewfactor_matrix(mesh, obstacles=[blocker]))
-    seconds = time.perf_counter() - t0
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     F = F.T  # pyviewfactor's F[i, j] is F(j -> i)
     area = centroids_and_areas(quads[:2 * m])[1]
     total = float((area[:m, None] * F[:m, m:2 * m]).sum())
-    return {"n": n, "method": "pyviewfactor 1.1.0", "seconds": seconds, "total": total,
+    return {"n": n, "method": "pyviewfactor 1.1.0", "seconds": seconds, "cpu_seconds": cpu, "total": total,
             "error": total - REFERENCE}
 
 
@@ -111,7 +113,7 @@ def main(argv=None) -> None:
     for n in sizes:
         for mode in MODES:
             rows.append(time_ours(n, mode))
-            print_table([rows[-1]], ["n", "method", "seconds", "total", "error"])
+            print_table([rows[-1]], ["n", "method", "seconds", "cpu_seconds", "total", "error"])
     peer_note = None
     if not args.no_pyviewfactor:
         try:
@@ -120,14 +122,14 @@ def main(argv=None) -> None:
             peer_note = f"first call (numba compile) took {time.perf_counter() - t0:.1f} s, excluded"
             for n in sizes:
                 rows.append(time_pyviewfactor(n))
-                print_table([rows[-1]], ["n", "method", "seconds", "total", "error"])
+                print_table([rows[-1]], ["n", "method", "seconds", "cpu_seconds", "total", "error"])
         except Exception as exc:  # noqa: BLE001 - the peer is optional; say why it is missing
             peer_note = f"pyviewfactor unavailable: {type(exc).__name__}: {exc}"
     for row in rows:
         peer = [r for r in rows if r["n"] == row["n"] and r["method"].startswith("pyviewfactor")]
         if peer and not row["method"].startswith("pyviewfactor"):
             row["speedup_vs_pyviewfactor"] = peer[0]["seconds"] / row["seconds"]
-    print_table(rows, ["n", "method", "seconds", "total", "error", "speedup_vs_pyviewfactor"],
+    print_table(rows, ["n", "method", "seconds", "cpu_seconds", "total", "error", "speedup_vs_pyviewfactor"],
                 title="Occluded parallel plates (reference 0.0995062946)")
     settings = {k: vars(v) if hasattr(v, "__dict__") else str(v) for k, v in MODES.items()}
     path = write_json("occlusion", {"reference": REFERENCE, "settings": settings, "pyviewfactor": peer_note,
