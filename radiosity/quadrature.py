@@ -466,6 +466,8 @@ def _singular_points(quads, sources, height, size):
     """Pairs and receiver parameters (u, v) of the source vertices touching the receivers.
 
     A triangle's collapsed corner is skipped: its Duffy map already smooths a singularity there."""
+    if not (height == 0).any():
+        return np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0)
     centre = quads.mean(axis=1)
     radius = np.linalg.norm(quads - centre[:, None, :], axis=2).max(axis=1)
     reach = np.linalg.norm(sources - centre[:, None, :], axis=2) <= radius[:, None] * (1 + 1e-6)
@@ -594,12 +596,16 @@ def _square_at_corner(quads, rects, corner, cell_pair, duffy):
             np.concatenate([cell_pair, cell_pair[cut]]), np.concatenate([duffy, np.zeros(cut.sum(), dtype=bool)]))
 
 
-def _forced_splits(quads, sources, height, rects, frames, plain):
+def _forced_splits(quads, sources, height, rects, frames, plain, at_collapse):
     """(n,) u and v masks: pieces too wide for their distance to a near-miss edge or vertex, or
     (``plain`` pieces, in the identity frame) to a touching vertex.
 
     ``quads`` (n, 4, 3) and ``sources`` (n, k, 3) are each piece's receiver and source,
-    ``height`` (n, k) the source vertices' heights above the receiver's plane (0: touching)."""
+    ``height`` (n, k) the source vertices' heights above the receiver's plane (0: touching).
+    An edge rising from a touching vertex is ignored by pieces closer to that vertex than their
+    extent, where its layer narrows with the distance and cutting cannot catch up with it, except
+    by pieces ``at_collapse`` of a Duffy frame on the vertex, which it makes smooth (they are
+    cut across the directions from the vertex only, by the caller)."""
     uc, vc = rects[:, 0] + rects[:, 2] / 2, rects[:, 1] + rects[:, 3] / 2
     u = np.column_stack([uc, rects[:, 0], rects[:, 0] + rects[:, 2], uc, uc])
     v = np.column_stack([vc, vc, vc, rects[:, 1], rects[:, 1] + rects[:, 3]])
@@ -619,7 +625,9 @@ def _forced_splits(quads, sources, height, rects, frames, plain):
     for extent in (extent_u, extent_v):
         across = np.linalg.norm(np.cross(extent[:, None, :], unit), axis=-1)
         along = np.linalg.norm(extent, axis=-1)[:, None]
-        by_edge = lifted & (_ADAPT_REACH * across > d_edge) & (across > _ADAPT_LAYER * h_edge)
+        near_end = (height == 0) & (d_vert < along)
+        from_end = (near_end | np.roll(near_end, -1, axis=1)) & ~at_collapse[:, None]
+        by_edge = lifted & ~from_end & (_ADAPT_REACH * across > d_edge) & (across > _ADAPT_LAYER * h_edge)
         by_vert = (height > 0) & (_ADAPT_REACH * along > d_vert) & (along > _ADAPT_LAYER * height)
         by_touch = plain[:, None] & (height == 0) & (_ADAPT_REACH * along > d_vert)
         force.append((by_edge | by_vert | by_touch).any(axis=1))
@@ -691,20 +699,22 @@ def _estimates(q, h):
     return h.sum(axis=1) - q, err_u, err_v
 
 
-def _forced_near_misses(quads, sources, i, j, height, pair, frame, rects, frames):
-    """(n,) u and v masks of :func:`_forced_splits` for pieces of near-miss pairs."""
+def _forced_near_misses(quads, sources, i, j, height, pair, frame, rects, frames, collapsed):
+    """(n,) u and v masks of :func:`_forced_splits` for pieces of near-miss pairs; ``collapsed``
+    (m,) marks pairs whose receiver is a triangle with a touching vertex on its collapsed corner."""
     from . import _tol
 
+    # a layer widening from a touching vertex (an edge rising from it) looks the same at every
+    # distance from the vertex: cutting towards it (along v in its Duffy frame, or in a receiver
+    # triangle's own collapsed map) never resolves it, cutting across the directions from it
+    # (along u) does
+    at_vertex = ((frame > 0) | collapsed[pair]) & (rects[:, 1] + rects[:, 3] >= 1)
     force_u, force_v = np.empty(len(pair), dtype=bool), np.empty(len(pair), dtype=bool)
     chunk = _tol.CHUNK_PAIRS // 4  # (chunk, k, 3) temporaries stay ~20 MB
     for lo in range(0, len(pair), chunk):
         sl, p = slice(lo, lo + chunk), pair[lo:lo + chunk]
         force_u[sl], force_v[sl] = _forced_splits(quads[i[p]], sources[j[p]], height[p], rects[sl],
-                                                  frames[frame[sl]], frame[sl] == 0)
-    # a layer widening from a touching vertex (an edge rising from it) looks the same at every
-    # distance from the vertex: cutting towards it (along v in its Duffy frame) never resolves
-    # it, cutting across the directions from it (along u) does
-    at_vertex = (frame > 0) & (rects[:, 1] + rects[:, 3] >= 1)
+                                                  frames[frame[sl]], frame[sl] == 0, at_vertex[sl])
     return force_u, force_v & ~at_vertex
 
 
@@ -726,6 +736,9 @@ def _adaptive_factors(quads, normals, sources, i, j, *, rtol, cap, size):
     radius = np.linalg.norm(quads[i] - centre[:, None, :], axis=2).max(axis=1)
     near = np.linalg.norm(sources[j] - centre[:, None, :], axis=2) < 2 * radius[:, None]
     touching = ((height == 0) & near).any(axis=1)  # only plain pieces are forced towards these
+    corner = quads[i, 3]
+    collapsed = (np.linalg.norm(quads[i, 2] - corner, axis=1) <= _TOUCH_REL * size) & (
+        (height == 0) & (np.linalg.norm(sources[j] - corner[:, None, :], axis=2) <= _TOUCH_REL * size[:, None])).any(axis=1)
     pair, frame, rects, q, h, frames, area = _first_pieces(quads, normals, sources, i, j, height, size, orders,
                                                            cap)
     points = np.where(frame == 0, orders[0] ** 2, orders[1] ** 2)  # per rectangle, by frame
@@ -745,7 +758,7 @@ def _adaptive_factors(quads, normals, sources, i, j, *, rtol, cap, size):
         sel = np.flatnonzero(lifted[pair] | (touching[pair] & (frame == 0)))
         if len(sel):
             force_u, force_v = _forced_near_misses(quads, sources, i, j, height, pair[sel], frame[sel], rects[sel],
-                                                   frames)
+                                                   frames, collapsed)
             split_u[sel] |= force_u
             split_v[sel] |= force_v
         wanted = split_u | split_v
