@@ -400,12 +400,16 @@ def _block_vertices(n, k, sc, any_far):
         w0, w1, w2 = sc[_ROW_W + 3 * i], sc[_ROW_W + 3 * i + 1], sc[_ROW_W + 3 * i + 2]
         la, ra, rho = sc[_ROW_W + 3 * k + i], sc[_ROW_W + 4 * k + i], sc[_ROW_W + 5 * k + i]
         for u in range(n):
-            ali = 2.0 * (c0[u] * w0[u] + c1[u] * w1[u] + c2[u] * w2[u]) \
-                + (w0[u] * w0[u] + w1[u] * w1[u] + w2[u] * w2[u])
-            lsq = C2[u] + ali
+            a0 = c0[u] + w0[u]
+            a1 = c1[u] + w1[u]
+            a2 = c2[u] + w2[u]
+            # |a_i|^2 directly: |c|^2 + ali cancels for a receiver near vertex i far from o;
+            # ali = |a_i|^2 - |c|^2 is formed without cancellation for the far lanes' rho.
+            lsq = a0 * a0 + a1 * a1 + a2 * a2
             la[u] = lsq
-            rho[u] = ali  # kept for the far lanes below: C2 - |a_i|^2 would cancel
-            h = (c0[u] + w0[u]) * n0[u] + (c1[u] + w1[u]) * n1[u] + (c2[u] + w2[u]) * n2[u]
+            rho[u] = 2.0 * (c0[u] * w0[u] + c1[u] * w1[u] + c2[u] * w2[u]) \
+                + (w0[u] * w0[u] + w1[u] * w1[u] + w2[u] * w2[u])
+            h = a0 * n0[u] + a1 * n1[u] + a2 * n2[u]
             hmin[u] = _fmin(hmin[u], h)
             hmax[u] = _fmax(hmax[u], h)
             d2max[u] = _fmax(d2max[u], lsq)

@@ -12,8 +12,9 @@ DEGENERATE_REL = 1e-14
 RAY_OFFSET_REL = 1e-5
 
 # A receiver closer than this to a source's plane (relative to the source's distance) lies in
-# that plane and sees the source edge-on: its form factor is 0.
-IN_PLANE_REL = 1e-12
+# that plane and sees the source edge-on: its form factor is 0. ~45 ulp: above the rounding of
+# the height itself, so a receiver 1e-13 off the plane still gets its (well conditioned) value.
+IN_PLANE_REL = 1e-14
 
 # Distance from a face plane, relative to the face size, within which a polygon counts as planar.
 PLANAR_REL = 1e-6

@@ -96,6 +96,7 @@ def point_to_polygons(points, normals, polygons) -> np.ndarray:
         msg = f"points and normals must have the same length, got {len(points)} and {len(normals)}"
         raise ValueError(msg)
     polys = _as_polygons(polygons)
+    points, polys = _power_of_two_scaled(points, polys)
     m, n = len(points), len(polys)
     _memory.check(f"the {m:,} x {n:,} form-factor matrix", 8 * m * n, "pass fewer receivers or polygons per call")
     if not HAVE_NUMBA:  # pragma: no cover
@@ -105,6 +106,17 @@ def point_to_polygons(points, normals, polygons) -> np.ndarray:
     if m and n:
         _lambert_matrix_kernel(points, normals, polys, _MODES["auto"], out)
     return out.T
+
+
+def _power_of_two_scaled(points: np.ndarray, polys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points and polygons scaled by a power of two (exactly, so no digit changes) when their
+    coordinates are so small or large that the kernel's squared areas would under- or
+    overflow; form factors do not depend on scale."""
+    big = max(float(np.abs(points).max(initial=0.0)), float(np.abs(polys).max(initial=0.0)))
+    if big == 0.0 or 1e-30 < big < 1e30:
+        return points, polys
+    k = int(np.clip(-np.round(np.log2(big)), -1000, 1000))
+    return np.ldexp(points, k), np.ldexp(polys, k)
 
 
 def _as_polygons(polygons) -> np.ndarray:
@@ -297,18 +309,18 @@ def _receiver_pieces(receiver: np.ndarray, normal: np.ndarray, source: np.ndarra
 def polygon_to_polygon(receiver, source, *, rtol: float = 1e-6) -> float:
     """Unoccluded area-averaged form factor F(receiver -> source) between two planar polygons.
 
-    The receiver is triangulated (earcut, so non-convex receivers work) and each triangle is
+    The receiver is triangulated (earcut, so non-convex receivers work) and each piece is
     integrated by :func:`radiosity.quadrature.pair_factors`: an a-priori Gauss order for
-    well-separated pieces, otherwise a ladder of Gauss rules (order 2, 4, 8, then the piece cut
-    into 2x2, 4x4, ... at order 8) until two successive rungs agree to ``rtol``. Touching and
-    nearly touching pairs converge because Lambert's integrand is smooth inside the receiver
-    and only log-singular on its boundary.
+    well-separated pieces, otherwise adaptive refinement graded toward touching edges and
+    corners until the error estimate meets ``rtol`` (see ``docs/formfactors.md``).
 
     Parameters
     ----------
     receiver, source : (k, 3) float
         Planar simple polygons, metres. The receiver's winding gives its front side
-        (counter-clockwise seen from the front); the source's winding is ignored.
+        (counter-clockwise seen from the front); the source's winding is ignored, as in
+        :func:`point_to_polygon`: a receiver crossing the source's plane sees one face of the
+        source from each side, and both count.
     rtol : float, default: 1e-6
         Relative accuracy requested, down to 1e-10.
 
@@ -327,15 +339,53 @@ def polygon_to_polygon(receiver, source, *, rtol: float = 1e-6) -> float:
     >>> round(radiosity.polygon_to_polygon(lower, upper, rtol=1e-9), 9)
     0.199824896
     """
-    from .quadrature import centroids_and_areas, pair_factors
-
     receiver = as_polygon(receiver, "receiver")
     source = as_polygon(source, "source")
     if not (1e-12 <= rtol < 1):
         raise ValueError(f"rtol must be in [1e-12, 1), got {rtol}")
+    # Work relative to a receiver vertex: quadrature nodes formed at 1e9 would lose 9 digits,
+    # and for nearby vertices this subtraction is exact.
+    origin = receiver[0].copy()
+    receiver, source = receiver - origin, source - origin
     normal = polygon_normals(receiver[None])[0]
-    if not normal.any() or not polygon_normals(source[None])[0].any():
+    source_normal = polygon_normals(source[None])[0]
+    if not normal.any() or not source_normal.any():
         return 0.0
+    total_area = float(np.linalg.norm(np.cross(receiver, np.roll(receiver, -1, axis=0)).sum(axis=0))) / 2
+    total = 0.0
+    for part in _sides_of_plane(receiver, source[0], source_normal):
+        part_area = float(np.linalg.norm(np.cross(part, np.roll(part, -1, axis=0)).sum(axis=0))) / 2
+        if part_area > 1e-14 * total_area:
+            total += part_area * _one_side(part, normal, source, rtol)
+    return total / total_area
+
+
+def _sides_of_plane(poly: np.ndarray, point: np.ndarray, normal: np.ndarray) -> list[np.ndarray]:
+    """``poly`` cut by the plane (point, normal) into its parts on either side (Sutherland-
+    Hodgman); a polygon on one side (or touching the plane) is returned whole."""
+    height = (poly - point) @ normal
+    tol = 1e-12 * float(np.abs(poly - point).max())
+    if not (height.max() > tol and height.min() < -tol):
+        return [poly]
+    parts = []
+    for sign in (1.0, -1.0):
+        h = sign * height
+        kept = []
+        for i in range(len(poly)):
+            j = (i + 1) % len(poly)
+            if h[i] >= 0:
+                kept.append(poly[i])
+            if (h[i] > 0 > h[j]) or (h[i] < 0 < h[j]):
+                kept.append(poly[i] + h[i] / (h[i] - h[j]) * (poly[j] - poly[i]))
+        if len(kept) >= 3:
+            parts.append(np.array(kept))
+    return parts
+
+
+def _one_side(receiver: np.ndarray, normal: np.ndarray, source: np.ndarray, rtol: float) -> float:
+    """F(receiver -> source) for a receiver on one side of the source's plane."""
+    from .quadrature import centroids_and_areas, pair_factors
+
     quads = _receiver_pieces(receiver, normal, source)
     if len(quads) == 0:
         return 0.0

@@ -77,14 +77,20 @@ def test_pair_factors_rejects_bad_rtol():
         pair_factors(quads, normals, c, a, np.array([0]), np.array([1]), rtol=2.0)
 
 
-def test_receiver_straddling_the_source_plane_counts_only_its_front_part():
-    """Surfaces are one-sided: the half of a floor behind a wall's plane sees its back (nothing)."""
+def test_receiver_straddling_the_source_plane():
+    """The fill is one-sided: the half of a floor behind a wall's plane sees the wall's back,
+    which sends nothing (pair_factors clips it away). polygon_to_polygon ignores the source's
+    winding, as point_to_polygon does: each half sees one face of the wall, and both count."""
     from radiosity import polygon_to_polygon
 
     wall = np.array([[0, 0, 0], [0, 1, 0], [0, 1, 1], [0, 0, 1]], float)  # x = 0, facing +x
     half = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
     full = np.array([[-1, 0, 0], [1, 0, 0], [1, 1, 0], [-1, 1, 0]], float)
     f_half = polygon_to_polygon(half, wall, rtol=1e-9)
-    f_full = polygon_to_polygon(full, wall, rtol=1e-9)
     np.testing.assert_allclose(f_half, 0.2000437761, rtol=1e-8)
-    np.testing.assert_allclose(f_full, 0.5 * f_half, rtol=1e-8)
+    np.testing.assert_allclose(polygon_to_polygon(full, wall, rtol=1e-9), f_half, rtol=1e-8)
+    quads = np.array([full, wall])
+    normals = np.array([[0, 0, 1.0], [1.0, 0, 0]])
+    c, a = centroids_and_areas(quads)
+    one_sided = pair_factors(quads, normals, c, a, np.array([0]), np.array([1]), rtol=1e-9)[0]
+    np.testing.assert_allclose(one_sided, 0.5 * f_half, rtol=1e-8)
