@@ -121,6 +121,11 @@ def _power_of_two_scaled(points: np.ndarray, polys: np.ndarray) -> tuple[np.ndar
 
 def _as_polygons(polygons) -> np.ndarray:
     """(n, k, 3) float64 polygons from an array or a ragged sequence (padded by repetition)."""
+    if isinstance(polygons, np.ndarray) and polygons.ndim == 3 and polygons.shape[1:2] >= (3,) \
+            and polygons.shape[2] == 3:
+        polys = np.ascontiguousarray(polygons, dtype=float)
+        if np.isfinite(polys).all():
+            return polys  # the common case, validated without a Python loop
     polys = [as_polygon(p, f"polygons[{q}]") for q, p in enumerate(polygons)]
     if not polys:
         return np.zeros((0, 3, 3))
