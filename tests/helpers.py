@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import mpmath as mp
 import numpy as np
 
 UNIT_SQUARE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)  # normal +z
@@ -63,3 +64,25 @@ def write_obj(path, objects: dict[str, list[np.ndarray]], materials: dict[str, t
             vid += len(poly)
     path.write_text("\n".join(lines) + "\n")
     return str(path)
+
+
+def parallel_rectangles_mp(a, b, c):
+    """Howell C-11: directly opposed a x b rectangles a distance c apart (mpmath, 30 digits)."""
+    with mp.workdps(30):
+        X, Y = mp.mpf(a) / c, mp.mpf(b) / c
+        t = (mp.log(mp.sqrt((1 + X**2) * (1 + Y**2) / (1 + X**2 + Y**2)))
+             + X * mp.sqrt(1 + Y**2) * mp.atan(X / mp.sqrt(1 + Y**2))
+             + Y * mp.sqrt(1 + X**2) * mp.atan(Y / mp.sqrt(1 + X**2)) - X * mp.atan(X) - Y * mp.atan(Y))
+        return 2 * t / (mp.pi * X * Y)
+
+
+def perpendicular_rectangles_mp(l, w, h):
+    """Howell C-14: w x l rectangle to a perpendicular h x l rectangle sharing the edge l
+    (mpmath, 30 digits)."""
+    with mp.workdps(30):
+        H, W = mp.mpf(h) / l, mp.mpf(w) / l
+        s = H**2 + W**2
+        t = (W * mp.atan(1 / W) + H * mp.atan(1 / H) - mp.sqrt(s) * mp.atan(1 / mp.sqrt(s))
+             + (mp.log((1 + W**2) * (1 + H**2) / (1 + s)) + W**2 * mp.log(W**2 * (1 + s) / ((1 + W**2) * s))
+                + H**2 * mp.log(H**2 * (1 + s) / ((1 + H**2) * s))) / 4)
+        return t / (mp.pi * W)

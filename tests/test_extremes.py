@@ -18,6 +18,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from radiosity import point_to_polygon, polygon_to_polygon
+from helpers import parallel_rectangles_mp, perpendicular_rectangles_mp
 
 U = 2.0**-53
 Z = np.array([0.0, 0.0, 1.0])
@@ -115,25 +116,11 @@ def howell_b2(a, b, c):
 
 
 def howell_c11(a, b, c):
-    """Directly opposed a x b rectangles a distance c apart (Howell C-11)."""
-    with mp.workdps(30):
-        X, Y = mp.mpf(a) / c, mp.mpf(b) / c
-        t = (mp.log(mp.sqrt((1 + X**2) * (1 + Y**2) / (1 + X**2 + Y**2)))
-             + X * mp.sqrt(1 + Y**2) * mp.atan(X / mp.sqrt(1 + Y**2))
-             + Y * mp.sqrt(1 + X**2) * mp.atan(Y / mp.sqrt(1 + X**2)) - X * mp.atan(X) - Y * mp.atan(Y))
-        return float(2 * t / (mp.pi * X * Y))
+    return float(parallel_rectangles_mp(a, b, c))
 
 
 def howell_c14(l, w, h):
-    """w x l rectangle to a perpendicular h x l rectangle sharing the edge l (Howell C-14)."""
-    with mp.workdps(30):
-        H, W = mp.mpf(h) / l, mp.mpf(w) / l
-        s = H**2 + W**2
-        t = (W * mp.atan(1 / W) + H * mp.atan(1 / H) - mp.sqrt(s) * mp.atan(1 / mp.sqrt(s))
-             + mp.log((1 + W**2) * (1 + H**2) / (1 + s)
-                      * (W**2 * (1 + s) / ((1 + W**2) * s)) ** (W**2)
-                      * (H**2 * (1 + s) / ((1 + H**2) * s)) ** (H**2)) / 4)
-        return float(t / (mp.pi * W))
+    return float(perpendicular_rectangles_mp(l, w, h))
 
 
 def ngon_axis(sides, h):

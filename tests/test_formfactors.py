@@ -11,8 +11,8 @@ from hypothesis import strategies as st
 
 import radiosity
 from radiosity.formfactors import _lambert_numpy, lambert_indexed, lambert_pairs, polygon_to_polygon
-from helpers import (PARALLEL_SQUARES, UNIT_SQUARE, WALL_X0, corner_point_factor, regular_polygon,
-                     square_at)
+from helpers import (PARALLEL_SQUARES, UNIT_SQUARE, WALL_X0, corner_point_factor, parallel_rectangles_mp,
+                     perpendicular_rectangles_mp, regular_polygon, square_at)
 
 Z = np.array([[0.0, 0.0, 1.0]])
 
@@ -35,23 +35,11 @@ def lambert_mp(x, n, poly, dps=40):
 
 
 def parallel_rectangles(a, b, c):
-    """Howell C-11: directly opposed a x b rectangles a distance c apart (mpmath)."""
-    X, Y = mp.mpf(a) / c, mp.mpf(b) / c
-    t = (mp.log(mp.sqrt((1 + X**2) * (1 + Y**2) / (1 + X**2 + Y**2)))
-         + X * mp.sqrt(1 + Y**2) * mp.atan(X / mp.sqrt(1 + Y**2))
-         + Y * mp.sqrt(1 + X**2) * mp.atan(Y / mp.sqrt(1 + X**2)) - X * mp.atan(X) - Y * mp.atan(Y))
-    return float(2 * t / (mp.pi * X * Y))
+    return float(parallel_rectangles_mp(a, b, c))
 
 
 def perpendicular_rectangles(l, w, h):
-    """Howell C-14: rectangle w x l to a perpendicular h x l rectangle sharing the edge l."""
-    H, W = mp.mpf(h) / l, mp.mpf(w) / l
-    s = H**2 + W**2
-    t = (W * mp.atan(1 / W) + H * mp.atan(1 / H) - mp.sqrt(s) * mp.atan(1 / mp.sqrt(s))
-         + mp.log((1 + W**2) * (1 + H**2) / (1 + s)
-                  * (W**2 * (1 + s) / ((1 + W**2) * s)) ** (W**2)
-                  * (H**2 * (1 + s) / ((1 + H**2) * s)) ** (H**2)) / 4)
-    return float(t / (mp.pi * W))
+    return float(perpendicular_rectangles_mp(l, w, h))
 
 
 def coaxial_disks(r1, r2, h):

@@ -14,18 +14,10 @@ import numpy as np
 import pytest
 
 from radiosity import polygon_to_polygon
+from helpers import parallel_rectangles_mp as parallel, perpendicular_rectangles_mp as perpendicular
 from radiosity.quadrature import _rect_points_numpy, centroids_and_areas, gauss_legendre_01, pair_factors, rect_points
 
 mp.mp.dps = 30
-
-
-def parallel(a, b, c):
-    """Howell C-11: directly opposed a x b rectangles a distance c apart."""
-    X, Y = mp.mpf(a) / c, mp.mpf(b) / c
-    t = (mp.log(mp.sqrt((1 + X**2) * (1 + Y**2) / (1 + X**2 + Y**2)))
-         + X * mp.sqrt(1 + Y**2) * mp.atan(X / mp.sqrt(1 + Y**2))
-         + Y * mp.sqrt(1 + X**2) * mp.atan(Y / mp.sqrt(1 + X**2)) - X * mp.atan(X) - Y * mp.atan(Y))
-    return float(2 * t / (mp.pi * X * Y))
 
 
 def parallel_offset(x, y, xi, eta, z):
@@ -41,17 +33,6 @@ def parallel_offset(x, y, xi, eta, z):
     total = sum((-1) ** (p + q + r + s) * g(x[p], y[q], eta[r], xi[s])
                 for p in range(2) for q in range(2) for r in range(2) for s in range(2))
     return float(total / ((mp.mpf(x[1]) - x[0]) * (mp.mpf(y[1]) - y[0])))
-
-
-def perpendicular(l, w, h):
-    """Howell C-14: w x l rectangle to a perpendicular h x l rectangle sharing the edge l."""
-    l, w, h = mp.mpf(l), mp.mpf(w), mp.mpf(h)
-    H, W = h / l, w / l
-    s = H**2 + W**2
-    t = (W * mp.atan(1 / W) + H * mp.atan(1 / H) - mp.sqrt(s) * mp.atan(1 / mp.sqrt(s))
-         + (mp.log((1 + W**2) * (1 + H**2) / (1 + s)) + W**2 * mp.log(W**2 * (1 + s) / ((1 + W**2) * s))
-            + H**2 * mp.log(H**2 * (1 + s) / ((1 + H**2) * s))) / 4)
-    return t / (mp.pi * W)
 
 
 def t_junction(a, b, c, d, w, h):
