@@ -434,6 +434,8 @@ def _block_edges(n, k, sc, any_far):
         lai, laj = sc[_ROW_W + 3 * k + i], sc[_ROW_W + 3 * k + j]
         rai, raj = sc[_ROW_W + 4 * k + i], sc[_ROW_W + 4 * k + j]
         rhoi, rhoj = sc[_ROW_W + 5 * k + i], sc[_ROW_W + 5 * k + j]
+        # The edge geometry is written out in both loops on purpose: an inlined helper
+        # returning it stopped LLVM from vectorising one of them (checked in the assembly).
         if not any_far:
             for u in range(n):
                 a0 = c0[u] + wi0[u]
