@@ -1,12 +1,16 @@
 """Numba kernels for Lambert's point-to-polygon form factor (used by ``formfactors``).
 
-Two paths share the same conventions (everything relative to the polygon's first vertex, degenerate
-and in-plane cases give 0, sources straddling the receiver's plane are clipped):
+Three paths share the same conventions (everything relative to the polygon's first vertex,
+degenerate and in-plane cases give 0, sources straddling the receiver's plane are clipped):
 
 - ``_ff_point``: one receiver point and one polygon, any vertex count, with clipping and the
-  cancellation-free far branch; the reference for the vectorised path and its fallback;
-- the block kernels: pairs in blocks, laid out structure-of-arrays so that LLVM vectorises the
-  edge loops; rows they cannot finish (clipping, far field) go to ``_ff_point``.
+  cancellation-free far branch; the reference for the vectorised paths and their fallback;
+- the one-source lane loops (``_triangle_lanes``, ``_quad_lanes``): one triangle or quad against
+  many receivers, everything in registers; ``point_to_polygon(s)`` and the fill's quadrature;
+- the block kernels: independent pairs (each lane its own source) in blocks, laid out
+  structure-of-arrays so that LLVM vectorises the edge loops; also polygons of > 4 vertices.
+Lanes the vectorised paths cannot finish (the source straddles the receiver's plane) go to
+``_ff_point``.
 """
 
 from __future__ import annotations
@@ -288,7 +292,7 @@ else:  # pragma: no cover
 # ---------------------------------------------------------------------------------------------
 # Structure-of-arrays block kernel. A block of up to _LANES pairs is gathered into rows of a
 # scratch array (one row per coordinate); every later loop runs over the lanes without branches,
-# which LLVM turns into SIMD code (AVX-512 here). Near and far lanes share one formula:
+# which LLVM turns into SIMD code (AVX2 or AVX-512, as the CPU has). Near and far lanes share one formula:
 #
 #     sum_e q_e xn_e = kappa (A . n) + sum_e (q_e - kappa) xn_e,   q_e = theta_e / s_e,
 #
@@ -419,7 +423,8 @@ def _block_vertices(n, k, sc, any_far):
                 r = np.sqrt(lsq)
                 ra[u] = r
                 c = C2[u] * gamma[u]
-                rho[u] = -rho[u] / (r * c * (c + r)) if far[u] > 0.0 else 0.0
+                v = -rho[u] / (r * c * (c + r))
+                rho[u] = v if far[u] > 0.0 else 0.0
 
 
 @_vjit()
@@ -583,53 +588,300 @@ def _quadrature_kernel(pts, nrm, wts, nq, slot, polys, j, mode, out):
             out[t] = acc / wsum if wsum > 0.0 else 0.0
 
 
-@_vjit()
-def _gather_source(points, normals, polys, lo, n, q, k, sc):
-    """Lanes lo..lo+n-1 are receivers, all facing source ``q``: fill c, n and the (constant) w
-    rows. Returns the vertex count the source needs (3 for a padded triangle)."""
+# ---------------------------------------------------------------------------------------------
+# One triangle or quad against many receivers (point_to_polygon(s)). The source's geometry is the
+# same in every lane, so it is prepared once as scalars (w_i = v_i - o, its area vector, radius
+# and plane offset), and each lane's whole computation (vertices, edges, flags) stays in
+# registers inside one loop over receivers that stores one value: LLVM vectorises it without
+# the run-time alias checks that loops writing several scratch rows need (and fail). Lanes whose
+# source straddles their plane are stored as -1 and finished by ``_ff_point``; near-only blocks
+# run a copy of the loop without the far terms. Polygons with more vertices use the block path.
+# ---------------------------------------------------------------------------------------------
+
+_SRC_LANES = 256
+# per-source constants, in ``_source_constants``' array
+_G_O = 0  # first vertex o (3)
+_G_W = 3  # w_1, w_2, w_3 (3 each)
+_G_A = 12  # twice the vector area (3)
+_G_BOUND = 15  # far2 * radius^2: lanes with |c|^2 above it are far
+_G_HWK = 16  # sum_i w_i . 2A / k: plane offset
+_G_INPLANE = 17  # IN_PLANE_REL^2 |2A|^2
+_G_OK = 18  # 1.0 unless the source is degenerate
+_G_K = 19  # vertex count the source needs (3 for a padded triangle)
+_G_SIZE = 20
+
+
+@_jit()
+def _source_constants(polys, q, mode, g):
+    """Fill ``g`` with source q's constants (see the _G_ offsets)."""
+    k = polys.shape[1]
+    kb = 3 if k == 3 or (polys[q, 3, 0] == polys[q, 2, 0] and polys[q, 3, 1] == polys[q, 2, 1]
+                         and polys[q, 3, 2] == polys[q, 2, 2]) else 4
+    w = np.zeros((4, 3))
     for d in range(3):
-        o = polys[q, 0, d]
-        for u in range(n):
-            sc[_ROW_C + d, u] = o - points[lo + u, d]
-            sc[_ROW_N + d, u] = normals[lo + u, d]
-            sc[_ROW_W + d, u] = 0.0
-        for i in range(1, k):
-            wi = polys[q, i, d] - o
-            for u in range(n):
-                sc[_ROW_W + 3 * i + d, u] = wi
-    padded = k == 4 and polys[q, 3, 0] == polys[q, 2, 0] and polys[q, 3, 1] == polys[q, 2, 1] \
-        and polys[q, 3, 2] == polys[q, 2, 2]
-    return 3 if padded else k
+        g[_G_O + d] = polys[q, 0, d]
+        for i in range(1, kb):
+            w[i, d] = polys[q, i, d] - polys[q, 0, d]
+            g[_G_W + 3 * (i - 1) + d] = w[i, d]
+        if kb == 3:
+            g[_G_W + 6 + d] = 0.0
+    r2, A0, A1, A2 = _radius2_area(w, kb)
+    hw = 0.0
+    for i in range(1, kb):
+        hw += w[i, 0] * A0 + w[i, 1] * A1 + w[i, 2] * A2
+    alen2 = A0 * A0 + A1 * A1 + A2 * A2
+    far2 = _FAR_RATIO * _FAR_RATIO if mode == 0 else 0.0
+    g[_G_A], g[_G_A + 1], g[_G_A + 2] = A0, A1, A2
+    g[_G_BOUND] = far2 * r2 if mode == 0 else np.inf
+    g[_G_HWK] = hw / kb
+    g[_G_INPLANE] = (_INPLANE * _INPLANE) * alen2
+    g[_G_OK] = 1.0 if (alen2 > (_DEG * _DEG) * r2 * r2 and r2 > 0.0) else 0.0
+    g[_G_K] = kb
+    return kb
+
+
+@_jit(inline="always")
+def _edge_near(a0, a1, a2, e0, e1, e2, lai, laj, n0, n1, n2):
+    """Lambert's term q_e xn_e of one edge (a: receiver to the edge's start, e: the edge)."""
+    x0 = a1 * e2 - a2 * e1
+    x1 = a2 * e0 - a0 * e2
+    x2 = a0 * e1 - a1 * e0
+    s2 = x0 * x0 + x1 * x1 + x2 * x2
+    s = np.sqrt(s2)
+    g = _atan2p(s, lai + (a0 * e0 + a1 * e1 + a2 * e2)) / s
+    t = g * (x0 * n0 + x1 * n1 + x2 * n2)
+    return t if s2 > (_DEG * _DEG) * (lai * laj) else 0.0
+
+
+@_jit(inline="always")
+def _edge_far(a0, a1, a2, e0, e1, e2, lai, laj, rai, raj, rhoi, rhoj, gamma, far, n0, n1, n2):
+    """(q_e - kappa) xn_e of one edge: the near term, or for a far lane
+    q_e - 1/|c|^2 = d1 / P + d2 with P = |a_i||a_j|, d1 = theta/sin - 1 and
+    d2 = 1/P - 1/|c|^2 = gamma (rho_i + rho_j) + rho_i rho_j (see ``_far_sum``)."""
+    x0 = a1 * e2 - a2 * e1
+    x1 = a2 * e0 - a0 * e2
+    x2 = a0 * e1 - a1 * e0
+    s2 = x0 * x0 + x1 * x1 + x2 * x2
+    s = np.sqrt(s2)
+    dot = lai + (a0 * e0 + a1 * e1 + a2 * e2)
+    g = _atan2p(s, dot) / s
+    gi = gamma + rhoi
+    gj = gamma + rhoj
+    sine = s * (gi * gj)
+    d1 = _asin_ratio_m1(sine * sine) if (sine < _SERIES_SINE and dot > 0.0) else g * (rai * raj) - 1.0
+    d2 = gamma * (rhoi + rhoj) + rhoi * rhoj
+    qe = d1 * (gi * gj) + d2 if far else g
+    t = qe * (x0 * n0 + x1 * n1 + x2 * n2)
+    return t if s2 > (_DEG * _DEG) * (lai * laj) else 0.0
+
+
+@_jit(inline="always")
+def _far_vertex(c0, c1, c2, w0, w1, w2, la, cabs):
+    """|a_i| and rho_i = 1/|a_i| - 1/|c|, from |a_i|^2 - |c|^2 = 2c.w + |w|^2 (no cancellation)."""
+    r = np.sqrt(la)
+    ali = 2.0 * (c0 * w0 + c1 * w1 + c2 * w2) + (w0 * w0 + w1 * w1 + w2 * w2)
+    return r, -ali / (r * cabs * (cabs + r))
+
+
+@_jit(inline="always")
+def _lane_value(total, hs, hmin, hmax, d2max, inplane, ok):
+    """The stored value: the form factor, 0 (degenerate or edge-on), or -1 (must be clipped)."""
+    live = ok and (hs * hs > inplane * d2max) and (hmax > 0.0)
+    value = _fmin(abs(total) * _INV_2PI, 1.0)
+    value = -1.0 if hmin < 0.0 else value
+    return value if live else 0.0
+
+
+@_vjit()
+def _triangle_lanes(PT, NT, lo, n, g, row, any_far):
+    """row[lo + u] for receivers lo..lo+n-1 against the triangle described by ``g``."""
+    o0, o1, o2 = g[_G_O], g[_G_O + 1], g[_G_O + 2]
+    w10, w11, w12 = g[_G_W], g[_G_W + 1], g[_G_W + 2]
+    w20, w21, w22 = g[_G_W + 3], g[_G_W + 4], g[_G_W + 5]
+    A0, A1, A2 = g[_G_A], g[_G_A + 1], g[_G_A + 2]
+    bound, hwk, inplane, ok = g[_G_BOUND], g[_G_HWK], g[_G_INPLANE], g[_G_OK] > 0.0
+    e10, e11, e12 = w20 - w10, w21 - w11, w22 - w12
+    for u in range(n):
+        n0, n1, n2 = NT[0, lo + u], NT[1, lo + u], NT[2, lo + u]
+        c0, c1, c2 = o0 - PT[0, lo + u], o1 - PT[1, lo + u], o2 - PT[2, lo + u]
+        b0, b1, b2 = c0 + w10, c1 + w11, c2 + w12
+        d0, d1, d2 = c0 + w20, c1 + w21, c2 + w22
+        la0 = c0 * c0 + c1 * c1 + c2 * c2
+        la1 = b0 * b0 + b1 * b1 + b2 * b2
+        la2 = d0 * d0 + d1 * d1 + d2 * d2
+        h0 = c0 * n0 + c1 * n1 + c2 * n2
+        h1 = b0 * n0 + b1 * n1 + b2 * n2
+        h2 = d0 * n0 + d1 * n1 + d2 * n2
+        hs = c0 * A0 + c1 * A1 + c2 * A2 + hwk
+        if any_far:
+            far = la0 > bound
+            gamma = 1.0 / np.sqrt(la0)
+            cabs = la0 * gamma
+            r1, p1 = _far_vertex(c0, c1, c2, w10, w11, w12, la1, cabs)
+            r2, p2 = _far_vertex(c0, c1, c2, w20, w21, w22, la2, cabs)
+            p1 = p1 if far else 0.0
+            p2 = p2 if far else 0.0
+            total = (A0 * n0 + A1 * n1 + A2 * n2) / la0 if far else 0.0
+            total += _edge_far(c0, c1, c2, w10, w11, w12, la0, la1, cabs, r1, 0.0, p1, gamma, far, n0, n1, n2)
+            total += _edge_far(b0, b1, b2, e10, e11, e12, la1, la2, r1, r2, p1, p2, gamma, far, n0, n1, n2)
+            total += _edge_far(d0, d1, d2, -w20, -w21, -w22, la2, la0, r2, cabs, p2, 0.0, gamma, far, n0, n1, n2)
+        else:
+            total = _edge_near(c0, c1, c2, w10, w11, w12, la0, la1, n0, n1, n2)
+            total += _edge_near(b0, b1, b2, e10, e11, e12, la1, la2, n0, n1, n2)
+            total += _edge_near(d0, d1, d2, -w20, -w21, -w22, la2, la0, n0, n1, n2)
+        row[lo + u] = _lane_value(total, hs, _fmin(h0, _fmin(h1, h2)), _fmax(h0, _fmax(h1, h2)),
+                                  _fmax(la0, _fmax(la1, la2)), inplane, ok)
+
+
+@_vjit()
+def _quad_lanes(PT, NT, lo, n, g, row, any_far):
+    """row[lo + u] for receivers lo..lo+n-1 against the quad described by ``g``."""
+    o0, o1, o2 = g[_G_O], g[_G_O + 1], g[_G_O + 2]
+    w10, w11, w12 = g[_G_W], g[_G_W + 1], g[_G_W + 2]
+    w20, w21, w22 = g[_G_W + 3], g[_G_W + 4], g[_G_W + 5]
+    w30, w31, w32 = g[_G_W + 6], g[_G_W + 7], g[_G_W + 8]
+    A0, A1, A2 = g[_G_A], g[_G_A + 1], g[_G_A + 2]
+    bound, hwk, inplane, ok = g[_G_BOUND], g[_G_HWK], g[_G_INPLANE], g[_G_OK] > 0.0
+    e10, e11, e12 = w20 - w10, w21 - w11, w22 - w12
+    e20, e21, e22 = w30 - w20, w31 - w21, w32 - w22
+    for u in range(n):
+        n0, n1, n2 = NT[0, lo + u], NT[1, lo + u], NT[2, lo + u]
+        c0, c1, c2 = o0 - PT[0, lo + u], o1 - PT[1, lo + u], o2 - PT[2, lo + u]
+        b0, b1, b2 = c0 + w10, c1 + w11, c2 + w12
+        d0, d1, d2 = c0 + w20, c1 + w21, c2 + w22
+        f0, f1, f2 = c0 + w30, c1 + w31, c2 + w32
+        la0 = c0 * c0 + c1 * c1 + c2 * c2
+        la1 = b0 * b0 + b1 * b1 + b2 * b2
+        la2 = d0 * d0 + d1 * d1 + d2 * d2
+        la3 = f0 * f0 + f1 * f1 + f2 * f2
+        h0 = c0 * n0 + c1 * n1 + c2 * n2
+        h1 = b0 * n0 + b1 * n1 + b2 * n2
+        h2 = d0 * n0 + d1 * n1 + d2 * n2
+        h3 = f0 * n0 + f1 * n1 + f2 * n2
+        hs = c0 * A0 + c1 * A1 + c2 * A2 + hwk
+        if any_far:
+            far = la0 > bound
+            gamma = 1.0 / np.sqrt(la0)
+            cabs = la0 * gamma
+            r1, p1 = _far_vertex(c0, c1, c2, w10, w11, w12, la1, cabs)
+            r2, p2 = _far_vertex(c0, c1, c2, w20, w21, w22, la2, cabs)
+            r3, p3 = _far_vertex(c0, c1, c2, w30, w31, w32, la3, cabs)
+            p1 = p1 if far else 0.0
+            p2 = p2 if far else 0.0
+            p3 = p3 if far else 0.0
+            total = (A0 * n0 + A1 * n1 + A2 * n2) / la0 if far else 0.0
+            total += _edge_far(c0, c1, c2, w10, w11, w12, la0, la1, cabs, r1, 0.0, p1, gamma, far, n0, n1, n2)
+            total += _edge_far(b0, b1, b2, e10, e11, e12, la1, la2, r1, r2, p1, p2, gamma, far, n0, n1, n2)
+            total += _edge_far(d0, d1, d2, e20, e21, e22, la2, la3, r2, r3, p2, p3, gamma, far, n0, n1, n2)
+            total += _edge_far(f0, f1, f2, -w30, -w31, -w32, la3, la0, r3, cabs, p3, 0.0, gamma, far, n0, n1, n2)
+        else:
+            total = _edge_near(c0, c1, c2, w10, w11, w12, la0, la1, n0, n1, n2)
+            total += _edge_near(b0, b1, b2, e10, e11, e12, la1, la2, n0, n1, n2)
+            total += _edge_near(d0, d1, d2, e20, e21, e22, la2, la3, n0, n1, n2)
+            total += _edge_near(f0, f1, f2, -w30, -w31, -w32, la3, la0, n0, n1, n2)
+        row[lo + u] = _lane_value(total, hs, _fmin(_fmin(h0, h1), _fmin(h2, h3)),
+                                  _fmax(_fmax(h0, h1), _fmax(h2, h3)),
+                                  _fmax(_fmax(la0, la1), _fmax(la2, la3)), inplane, ok)
+
+
+@_vjit()
+def _any_far(PT, lo, n, g):
+    """Whether any receiver lo..lo+n-1 is far from the source described by ``g``."""
+    o0, o1, o2, bound = g[_G_O], g[_G_O + 1], g[_G_O + 2], g[_G_BOUND]
+    most = 0.0
+    for u in range(n):
+        c0, c1, c2 = o0 - PT[0, lo + u], o1 - PT[1, lo + u], o2 - PT[2, lo + u]
+        most = _fmax(most, c0 * c0 + c1 * c1 + c2 * c2)
+    return most > bound
+
+
+@_jit()
+def _source_block(PT, NT, lo, n, polys, q, mode, row, g, w, h, wc):
+    """row[lo + u] = F(receiver lo + u -> polys[q]) for u < n, polys[q] a triangle or quad;
+    receivers are the columns of PT, NT (3, m)."""
+    kb = _source_constants(polys, q, mode, g)
+    any_far = _any_far(PT, lo, n, g)
+    if kb == 3:
+        _triangle_lanes(PT, NT, lo, n, g, row, any_far)
+    else:
+        _quad_lanes(PT, NT, lo, n, g, row, any_far)
+    for u in range(n):
+        if row[lo + u] < 0.0:
+            row[lo + u] = _ff_point(PT.T, NT.T, polys, lo + u, q, polys.shape[1], w, h, wc, mode)
+
+
+@_jit(parallel=True)
+def _quadrature_source_kernel(pts, nrm, wts, nq, slot, polys, j, mode, out):
+    """``_quadrature_kernel`` for triangles and quads, with the pairs sorted by source ``j``: the
+    receiver points of a run of pairs facing one source are copied into (3, n) rows and go
+    through the one-source lane loops together."""
+    m = slot.shape[0]
+    k = polys.shape[1]
+    per = max(1, _BLOCK // nq)
+    ntasks = (m + per - 1) // per
+    for task in _prange(ntasks):
+        t0 = task * per
+        t1 = min(m, t0 + per)
+        n = (t1 - t0) * nq
+        PT = np.empty((3, n))
+        NT = np.empty((3, n))
+        vals = np.empty(n)
+        g = np.empty(_G_SIZE)
+        w, h, wc = np.empty((k, 3)), np.empty(k), np.empty((2 * k, 3))
+        for t in range(t0, t1):
+            for r in range(nq):
+                for d in range(3):
+                    PT[d, (t - t0) * nq + r] = pts[slot[t] * nq + r, d]
+                    NT[d, (t - t0) * nq + r] = nrm[slot[t] * nq + r, d]
+        t = t0
+        while t < t1:
+            te = t + 1
+            while te < t1 and j[te] == j[t]:
+                te += 1
+            for lo in range((t - t0) * nq, (te - t0) * nq, _SRC_LANES):
+                _source_block(PT, NT, lo, min(_SRC_LANES, (te - t0) * nq - lo), polys, j[t], mode, vals, g,
+                              w, h, wc)
+            t = te
+        for t in range(t0, t1):
+            acc = 0.0
+            wsum = 0.0
+            for r in range(nq):
+                wq = wts[slot[t] * nq + r]
+                acc += wq * vals[(t - t0) * nq + r]
+                wsum += wq
+            out[t] = acc / wsum if wsum > 0.0 else 0.0
 
 
 @_jit(parallel=True)
 def _lambert_matrix_kernel(points, normals, polys, mode, out):
     """out[q, p] = F(points[p] -> polys[q]) for every receiver p and polygon q.
 
-    Tasks are (block of _LANES receivers) x (range of polygons), so that a few receivers facing
-    many polygons still use every core.
+    Tasks are (block of receivers) x (range of polygons), so that a few receivers facing many
+    polygons still use every core. Triangles and quads take the one-source lane loops, larger
+    polygons the block path.
     """
     m = points.shape[0]
     nsrc = polys.shape[0]
     k = polys.shape[1]
-    nblocks = (m + _LANES - 1) // _LANES
+    lanes = _SRC_LANES if k <= 4 else _LANES
+    PT = np.ascontiguousarray(points.T)
+    NT = np.ascontiguousarray(normals.T)
+    nblocks = (m + lanes - 1) // lanes
     nchunks = max(1, min(nsrc, (32 + nblocks - 1) // nblocks))
     per = (nsrc + nchunks - 1) // nchunks
-    far_ratio = _FAR_RATIO if mode == 0 else 0.0
     for task in _prange(nblocks * nchunks):
-        b = task // nchunks
-        lo = b * _LANES
-        n = min(_LANES, m - lo)
+        lo = (task // nchunks) * lanes
+        n = min(lanes, m - lo)
+        g = np.empty(_G_SIZE)
+        w, h, wc = np.empty((k, 3)), np.empty(k), np.empty((2 * k, 3))
+        if k <= 4:
+            for q in range((task % nchunks) * per, min(nsrc, (task % nchunks + 1) * per)):
+                _source_block(PT, NT, lo, n, polys, q, mode, out[q], g, w, h, wc)
+            continue
         sc = np.empty((_ROW_W + 6 * k, _LANES + _PAD))
         redo = np.empty(_LANES, dtype=np.bool_)
-        w, h, wc = np.empty((k, 3)), np.empty(k), np.empty((2 * k, 3))
+        pidx = np.arange(lo, lo + n)
+        qidx = np.empty(n, dtype=np.int64)
         for q in range((task % nchunks) * per, min(nsrc, (task % nchunks + 1) * per)):
-            kb = _gather_source(points, normals, polys, lo, n, q, k, sc)
-            any_far = _block_setup(n, kb, sc, far_ratio) > 0
-            _block_vertices(n, kb, sc, any_far)
-            _block_edges(n, kb, sc, any_far)
-            row = out[q]
-            if _block_finish(n, kb, sc, row, lo, redo):
-                for u in range(n):
-                    if redo[u]:
-                        row[lo + u] = _ff_point(points, normals, polys, lo + u, q, k, w, h, wc, mode)
+            qidx[:] = q
+            _lambert_block(points, normals, polys, pidx, qidx, 0, n, mode, out[q, lo:lo + n], sc, redo, w, h, wc)

@@ -16,7 +16,7 @@ import numpy as np
 
 from . import _memory, _tol
 from ._lambert import (HAVE_NUMBA, _lambert_indexed_kernel, _lambert_matrix_kernel,  # noqa: F401
-                       _lambert_rows_kernel, _quadrature_kernel)
+                       _lambert_rows_kernel, _quadrature_kernel, _quadrature_source_kernel)
 from ._validate import as_points, as_polygon, as_unit_vectors
 
 __all__ = ["point_to_polygon", "point_to_polygons", "polygon_to_polygon"]

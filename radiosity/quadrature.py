@@ -331,12 +331,21 @@ def _weighted_means(pts, nrm, w, slot, sources, j, mode="auto"):
     ``pts`` (u, nq, 3) and ``w`` (u, nq) are the points and weights of u receiver pieces,
     ``nrm`` (u, 3) their normals; ``slot`` and ``j`` (t,) pick a piece and a source per pair.
     """
-    from .formfactors import HAVE_NUMBA, _MODES, _quadrature_kernel, lambert_pairs
+    from .formfactors import HAVE_NUMBA, _MODES, _quadrature_kernel, _quadrature_source_kernel, lambert_pairs
 
     out = np.empty(len(slot))
     nq = pts.shape[1]
     flat = np.ascontiguousarray(pts.reshape(-1, 3))
     normals = np.ascontiguousarray(np.repeat(nrm, nq, axis=0))
+    if HAVE_NUMBA and sources.shape[1] <= 4:
+        # grouped by source, so that each source meets its receivers' points in SIMD lanes together
+        order = np.argsort(j, kind="stable")
+        sorted_out = np.empty(len(slot))
+        _quadrature_source_kernel(flat, normals, np.ascontiguousarray(w.reshape(-1)), nq,
+                                  slot[order].astype(np.int64), np.ascontiguousarray(sources),
+                                  np.ascontiguousarray(j[order], dtype=np.int64), _MODES[mode], sorted_out)
+        out[order] = sorted_out
+        return out
     if HAVE_NUMBA:
         _quadrature_kernel(flat, normals, np.ascontiguousarray(w.reshape(-1)), nq, slot.astype(np.int64),
                            np.ascontiguousarray(sources), np.ascontiguousarray(j, dtype=np.int64),
