@@ -46,6 +46,7 @@ _INPLANE = _tol.IN_PLANE_REL
 _FAR_RATIO = _tol.FAR_FIELD_RATIO
 _SERIES_SINE = _tol.FAR_SERIES_SINE
 _BLOCK = _tol.KERNEL_BLOCK
+_GRAZING2 = _tol.GRAZING_SINE * _tol.GRAZING_SINE
 _INV_2PI = 1.0 / _TWO_PI
 
 
@@ -190,10 +191,82 @@ def _ff_point(points, normals, polys, p, qsrc, k, w, h, wc, mode):
     else:
         kc = k
         verts = w
+    if mode == 0:
+        grazing, value = _horizon_sum(c0, c1, c2, n0, n1, n2, verts, kc)
+        if grazing:
+            return value
     C2 = c0 * c0 + c1 * c1 + c2 * c2
     if mode == 1 or not (C2 > (_FAR_RATIO * _FAR_RATIO) * r2max):
         return _raw_sum(c0, c1, c2, n0, n1, n2, verts, kc)
     return _far_sum(c0, c1, c2, n0, n1, n2, verts, kc, C2, A0, A1, A2)
+
+
+@_jit(inline="always")
+def _horizon_sum(c0, c1, c2, n0, n1, n2, verts, kc):
+    """Lambert's sum for a source seen just above the receiver's horizon, or (False, 0) if
+    some edge rises higher than GRAZING_SINE.
+
+    Lambert's edge terms theta_e C_e (C_e the cosine between the edge plane's normal and the
+    receiver's) are O(1) near the horizon while F ~ elevation²: their sum cancels. The azimuths
+    the edges sweep around the receiver's normal, dphi_e, add up to 2 pi times the winding number
+    w, so S = sum_e theta_e C_e = 2 pi w - sum_e T_e with T_e = dphi_e - C_e theta_e, which is
+    O(elevation²) for an edge near the horizon. With X = a.b, Y = |a x b|, eps = h_a h_b (heights)
+    and d = 1 - |C| = |x_h|²/Y²/(1 + |C|), x_h = (h_b a - h_a b) x n the horizontal part of a x b:
+
+        T_e = sign(C) [atan2(Y (eps - d X), X² - eps X + |C| Y²) + d theta]   (|C| >= 1/2)
+        T_e = dphi_e - C theta                                                (|C| < 1/2)
+
+    (the first is dphi - theta, one angle difference, plus d theta; the second has no
+    cancellation where the edge plane is steep). Each edge's elevation is bounded by
+    max(h_a, h_b) / (distance from the receiver to the segment).
+    """
+    tsum = 0.0
+    wsum = 0.0
+    for i in range(kc):
+        j = i + 1 if i + 1 < kc else 0
+        e0 = verts[j, 0] - verts[i, 0]
+        e1 = verts[j, 1] - verts[i, 1]
+        e2 = verts[j, 2] - verts[i, 2]
+        if e0 == 0.0 and e1 == 0.0 and e2 == 0.0:
+            continue
+        a0, a1, a2 = c0 + verts[i, 0], c1 + verts[i, 1], c2 + verts[i, 2]
+        b0, b1, b2 = c0 + verts[j, 0], c1 + verts[j, 1], c2 + verts[j, 2]
+        x0 = a1 * e2 - a2 * e1
+        x1 = a2 * e0 - a0 * e2
+        x2 = a0 * e1 - a1 * e0
+        s2 = x0 * x0 + x1 * x1 + x2 * x2
+        la = a0 * a0 + a1 * a1 + a2 * a2
+        lb = b0 * b0 + b1 * b1 + b2 * b2
+        ha = a0 * n0 + a1 * n1 + a2 * n2
+        hb = b0 * n0 + b1 * n1 + b2 * n2
+        # the edge's points are no higher than max(h_a, h_b) and no nearer than the segment
+        ae = a0 * e0 + a1 * e1 + a2 * e2
+        ee = e0 * e0 + e1 * e1 + e2 * e2
+        t = _fmin(1.0, _fmax(0.0, -ae / ee))
+        p0, p1, p2 = a0 + t * e0, a1 + t * e1, a2 + t * e2
+        hm = _fmax(abs(ha), abs(hb))
+        if hm * hm > _GRAZING2 * (p0 * p0 + p1 * p1 + p2 * p2):
+            return False, 0.0
+        if not (s2 > (_DEG * _DEG) * (la * lb)):
+            continue  # receiver on the edge's line (in the horizon): the term is 0
+        s = np.sqrt(s2)
+        X = la + ae
+        theta = _atan2p(s, X)
+        xn = x0 * n0 + x1 * n1 + x2 * n2
+        eps = ha * hb
+        dphi = np.arctan2(xn, X - eps)
+        cabs = abs(xn) / s
+        if cabs < 0.5:
+            tsum += dphi - (xn / s) * theta
+        else:
+            v0, v1, v2 = hb * a0 - ha * b0, hb * a1 - ha * b1, hb * a2 - ha * b2
+            d = (v0 * v0 + v1 * v1 + v2 * v2) / s2 / (1.0 + cabs)
+            t = np.arctan2(s * (eps - d * X), X * X - eps * X + cabs * s2) + d * theta
+            tsum += t if xn > 0.0 else -t
+        wsum += dphi
+    winding = np.round(wsum / _TWO_PI)
+    value = abs(_TWO_PI * winding - tsum) * _INV_2PI
+    return True, min(value, 1.0)
 
 
 @_jit(inline="always")
@@ -494,6 +567,13 @@ def _block_finish(n, k, sc, out, lo, redo):
     total, A0, A1, A2, r2 = sc[_ROW_TOTAL], sc[_ROW_A], sc[_ROW_A + 1], sc[_ROW_A + 2], sc[_ROW_R2]
     hmin, hmax, d2max = sc[_ROW_HMIN], sc[_ROW_HMAX], sc[_ROW_D2MAX]
     inv_k = 1.0 / k
+    d2min = sc[_ROW_GAMMA]  # free once the edges are summed
+    for u in range(n):
+        d2min[u] = sc[_ROW_W + 3 * k, u]
+    for i in range(1, k):
+        la = sc[_ROW_W + 3 * k + i]
+        for u in range(n):
+            d2min[u] = _fmin(d2min[u], la[u])
     count = 0
     for u in range(n):
         alen2 = A0[u] * A0[u] + A1[u] * A1[u] + A2[u] * A2[u]
@@ -505,7 +585,8 @@ def _block_finish(n, k, sc, out, lo, redo):
         live = (alen2 > (_DEG * _DEG) * r2[u] * r2[u]) and (r2[u] > 0.0) \
             and (hs * hs > (_INPLANE * _INPLANE) * d2max[u] * alen2) and (hmax[u] > 0.0)
         value = abs(total[u]) * _INV_2PI
-        flag = live and hmin[u] < 0.0
+        low = max(abs(hmin[u]), abs(hmax[u]))
+        flag = live and (hmin[u] < 0.0 or low * low <= _GRAZING2 * d2min[u])
         out[lo + u] = _fmin(value, 1.0) if live else 0.0
         redo[u] = flag
         count += 1 if flag else 0
@@ -684,11 +765,13 @@ def _far_vertex(c0, c1, c2, w0, w1, w2, la, cabs):
 
 
 @_jit(inline="always")
-def _lane_value(total, hs, hmin, hmax, d2max, inplane, ok):
-    """The stored value: the form factor, 0 (degenerate or edge-on), or -1 (must be clipped)."""
+def _lane_value(total, hs, hmin, hmax, d2max, rise, inplane, ok):
+    """The stored value: the form factor, 0 (degenerate or edge-on), or -1 for ``_ff_point``
+    (the source must be clipped, or every vertex is within GRAZING_SINE of the horizon: rise =
+    max_i h_i² - GRAZING_SINE² |a_i|² <= 0)."""
     live = ok and (hs * hs > inplane * d2max) and (hmax > 0.0)
     value = _fmin(abs(total) * _INV_2PI, 1.0)
-    value = -1.0 if hmin < 0.0 else value
+    value = -1.0 if (hmin < 0.0 or rise <= 0.0) else value
     return value if live else 0.0
 
 
@@ -729,8 +812,9 @@ def _triangle_lanes(PT, NT, lo, n, g, row, any_far):
             total = _edge_near(c0, c1, c2, w10, w11, w12, la0, la1, n0, n1, n2)
             total += _edge_near(b0, b1, b2, e10, e11, e12, la1, la2, n0, n1, n2)
             total += _edge_near(d0, d1, d2, -w20, -w21, -w22, la2, la0, n0, n1, n2)
+        rise = _fmax(h0 * h0 - _GRAZING2 * la0, _fmax(h1 * h1 - _GRAZING2 * la1, h2 * h2 - _GRAZING2 * la2))
         row[lo + u] = _lane_value(total, hs, _fmin(h0, _fmin(h1, h2)), _fmax(h0, _fmax(h1, h2)),
-                                  _fmax(la0, _fmax(la1, la2)), inplane, ok)
+                                  _fmax(la0, _fmax(la1, la2)), rise, inplane, ok)
 
 
 @_vjit()
@@ -779,9 +863,11 @@ def _quad_lanes(PT, NT, lo, n, g, row, any_far):
             total += _edge_near(b0, b1, b2, e10, e11, e12, la1, la2, n0, n1, n2)
             total += _edge_near(d0, d1, d2, e20, e21, e22, la2, la3, n0, n1, n2)
             total += _edge_near(f0, f1, f2, -w30, -w31, -w32, la3, la0, n0, n1, n2)
+        rise = _fmax(_fmax(h0 * h0 - _GRAZING2 * la0, h1 * h1 - _GRAZING2 * la1),
+                     _fmax(h2 * h2 - _GRAZING2 * la2, h3 * h3 - _GRAZING2 * la3))
         row[lo + u] = _lane_value(total, hs, _fmin(_fmin(h0, h1), _fmin(h2, h3)),
                                   _fmax(_fmax(h0, h1), _fmax(h2, h3)),
-                                  _fmax(_fmax(la0, la1), _fmax(la2, la3)), inplane, ok)
+                                  _fmax(_fmax(la0, la1), _fmax(la2, la3)), rise, inplane, ok)
 
 
 @_vjit()

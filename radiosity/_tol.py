@@ -45,6 +45,13 @@ FAR_FIELD_RATIO = 2.0
 # rounding of theta/sin(theta) - 1 formed from atan2, so the series is also the more accurate.
 FAR_SERIES_SINE = 0.03
 
+# A source whose every point is seen below this elevation sine (every edge rises at most this
+# far above the receiver's horizon) uses the horizon form of Lambert's sum: per edge the small
+# difference between its azimuth swept and its Lambert term, plus 2π times the winding number.
+# Lambert's raw terms are O(1) there while F ~ elevation², so the raw sum would lose
+# 1/elevation² of its digits (2^8 at 1/16, which the raw sum still affords).
+GRAZING_SINE = 1.0 / 16.0
+
 # Receiver-triangle pairs handed to one parallel task of the numba kernels.
 KERNEL_BLOCK = 4096
 
