@@ -531,6 +531,27 @@ def fam_grazing_coplanar(quick):
     return f
 
 
+def fam_grazing_low(quick):
+    f = Family("grazing: low sources parallel to the receiver's plane", "point_to_polygon", "mpmath Lambert",
+               1e-13, "random convex polygons (3..6 vertices) in a plane parallel to the tangent plane, "
+               "seen at elevation 1e-8..0.05 from distance 1.5..5 (the horizon form); a strip 1e-4 x 1e4 "
+               "rising from the horizon; sources near the horizon that surround or cross the zenith")
+    rng = np.random.default_rng(5)
+    for count in range(30 if quick else 120):
+        dist, azimuth = rng.uniform(1.5, 5), rng.uniform(0, 2 * np.pi)
+        poly = random_convex(rng) + [dist * np.cos(azimuth), dist * np.sin(azimuth), 0]
+        poly[:, 2] = 10.0 ** rng.uniform(-8, -1.3) * dist
+        f.point(f"random #{count}, elevation {poly[0, 2] / dist:.0e}", [0, 0, 0], Z, poly)
+    strip = np.array([[0, 1, 0], [1e4, 1, 0], [1e4, 1, 1e-4], [0, 1, 1e-4]], float)
+    f.point("strip 1e-4 high, 1e4 wide, at distance 1 (Howell B-2)", [0, 0, 0], Z, strip,
+            lambda: howell_b2(1e-4, 1e4, 1))
+    ceiling = np.array([[-1e3, -1e3, 1.0], [2e3, -1e3, 1.0], [-1e3, 2e3, 1.0]])
+    zenith_strip = np.array([[-1e3, -0.1, 1.0], [1e3, -0.1, 1.0], [1e3, 0.1, 1.0], [-1e3, 0.1, 1.0]])
+    f.point("ceiling triangle 3e3 wide at height 1 (winding number 1)", [0, 0, 0], Z, ceiling)
+    f.point("strip 2e3 long at height 1, crossing the zenith", [0, 0, 0], Z, zenith_strip)
+    return f
+
+
 def fam_straddling(quick):
     f = Family("straddling the receiver's plane", "point_to_polygon", "mpmath clip + Lambert", 1e-13,
                "random convex polygons crossing the tangent plane (clipped); vertices and edges on or "
@@ -945,7 +966,7 @@ def fam_behind(quick):
 
 
 POINT_FAMILIES = [fam_near, fam_near_vertex, fam_far, fam_howell, fam_ngon, fam_grazing_horizon,
-                  fam_grazing_edge_on, fam_grazing_coplanar, fam_straddling, fam_zero, fam_edge_limit,
+                  fam_grazing_edge_on, fam_grazing_coplanar, fam_grazing_low, fam_straddling, fam_zero, fam_edge_limit,
                   fam_tiny, fam_offsets, fam_scale_sweep, fam_slivers, fam_nonconvex, fam_enclosure]
 PAIR_FAMILIES = [fam_parallel, fam_shared_edge, fam_shared_vertex, fam_near_touching, fam_coplanar,
                  fam_pair_scale, fam_reciprocity, fam_behind]

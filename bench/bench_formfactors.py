@@ -54,6 +54,42 @@ def closed_cube(nd):
     return np.array(quads), np.array(normals)
 
 
+def minimal_matrix_kernel():
+    """The float64 limit of the receivers x triangles pattern on this machine: Lambert's raw sum
+    and nothing else (no clipping, far-field series, degenerate or in-plane checks), one SIMD
+    loop per edge over (3, m) receiver rows, in parallel over triangles. Not a usable kernel
+    (it errs where the product's does not); a ceiling to read the product's figure against."""
+    import numba
+
+    from radiosity._lambert import _atan2p
+
+    @numba.njit(parallel=True, fastmath={"contract"}, error_model="numpy", cache=False)
+    def kernel(P, N, tris, out):
+        m = P.shape[1]
+        for q in numba.prange(tris.shape[0]):
+            row = out[q]
+            row[:] = 0.0
+            for i in range(3):
+                j = (i + 1) % 3
+                w0, w1, w2 = tris[q, i, 0], tris[q, i, 1], tris[q, i, 2]
+                e0, e1, e2 = tris[q, j, 0] - w0, tris[q, j, 1] - w1, tris[q, j, 2] - w2
+                for u in range(m):
+                    a0, a1, a2 = w0 - P[0, u], w1 - P[1, u], w2 - P[2, u]
+                    x0, x1, x2 = a1 * e2 - a2 * e1, a2 * e0 - a0 * e2, a0 * e1 - a1 * e0
+                    s = np.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+                    dot = a0 * a0 + a1 * a1 + a2 * a2 + a0 * e0 + a1 * e1 + a2 * e2
+                    row[u] += _atan2p(s, dot) / s * (x0 * N[0, u] + x1 * N[1, u] + x2 * N[2, u])
+            for u in range(m):
+                row[u] = abs(row[u]) / (2 * np.pi)
+
+    def run(points, normals, tris, out=None):
+        out = np.empty((len(tris), len(points))) if out is None else out
+        kernel(np.ascontiguousarray(points.T), np.ascontiguousarray(normals.T), tris, out)
+        return out
+
+    return run
+
+
 def rate(fn, m, repeat):
     best_wall, best_cpu = np.inf, np.inf
     for _ in range(repeat):
@@ -82,6 +118,8 @@ def main(argv=None):
     tris = pairs_case(nt, rng)[2][:, :3].copy()
     lambert_pairs(pts[:10], nrm[:10], polys[:10])  # compile / load cache
     point_to_polygons(rpts[:3], rnrm[:3], tris[:2])
+    minimal = minimal_matrix_kernel()
+    minimal(rpts[:3], rnrm[:3], tris[:2])
     rows = []
     mn = min(m, 200_000)
     base_wall, base_cpu = rate(lambda: _lambert_numpy(pts[:mn], nrm[:mn], polys[:mn]), mn, repeat)
@@ -90,7 +128,8 @@ def main(argv=None):
     for threads in (1, 2):
         numba.set_num_threads(threads)
         cases = {"numba, independent pairs": (lambda: lambert_pairs(pts, nrm, polys), m),
-                 "numba, receivers x triangles": (lambda: point_to_polygons(rpts, rnrm, tris), mr * nt)}
+                 "numba, receivers x triangles": (lambda: point_to_polygons(rpts, rnrm, tris), mr * nt),
+                 "ceiling: bare raw sum, receivers x triangles": (lambda: minimal(rpts, rnrm, tris), mr * nt)}
         for name, (fn, count) in cases.items():
             wall, cpu = rate(fn, count, repeat)
             rows.append({"kernel": name, "threads": threads, "Mpairs/s wall": wall, "Mpairs/cpu-s": cpu,
