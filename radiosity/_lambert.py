@@ -131,8 +131,9 @@ def _ff_point(points, normals, polys, p, qsrc, k, w, h, wc, mode):
     """Lambert form factor from receiver ``x`` (normal ``nr``) to ``poly[:k]``; scratch w, h, wc.
 
     Everything is computed relative to the polygon's first vertex ``o``: ``c = o - x`` and
-    ``w_i = v_i - o``, so translating the scene loses no digits. mode 0: automatic (far branch
-    with series where its error estimate allows); 1: raw Lambert sum only (for comparisons).
+    ``w_i = v_i - o``, so translating the scene loses no digits. mode 0: automatic (far form
+    for far sources, the near-plane and horizon forms for grazing ones, else the raw sum);
+    1: raw Lambert sum only (for comparisons); 2: as 0 without the grazing forms (the fill).
     """
     o0, o1, o2 = polys[qsrc, 0, 0], polys[qsrc, 0, 1], polys[qsrc, 0, 2]
     c0, c1, c2 = o0 - points[p, 0], o1 - points[p, 1], o2 - points[p, 2]
@@ -191,20 +192,27 @@ def _ff_point(points, normals, polys, p, qsrc, k, w, h, wc, mode):
     else:
         kc = k
         verts = w
-    if mode == 0:
-        grazing, value = _horizon_sum(c0, c1, c2, n0, n1, n2, verts, kc)
-        if grazing:
-            return value
     C2 = c0 * c0 + c1 * c1 + c2 * c2
-    if mode == 1 or not (C2 > (_FAR_RATIO * _FAR_RATIO) * r2max):
+    far = C2 > (_FAR_RATIO * _FAR_RATIO) * r2max
+    if mode == 0:
+        near, value = _near_plane_sum(c0, c1, c2, n0, n1, n2, verts, kc, A0, A1, A2, C2 if far else 0.0, r2max)
+        if near:
+            return value
+        grazing, total, rise2 = _horizon_signed(c0, c1, c2, n0, n1, n2, verts, kc)
+        # A far source: the far form loses ~1/elevation² digits, the horizon form ~elevation times
+        # distance/size (its small terms cancel once more); take the smaller.
+        if grazing and (not far or rise2 * rise2 * rise2 * C2 < r2max):
+            return min(abs(total) * _INV_2PI, 1.0)
+    if mode == 1 or not far:
         return _raw_sum(c0, c1, c2, n0, n1, n2, verts, kc)
     return _far_sum(c0, c1, c2, n0, n1, n2, verts, kc, C2, A0, A1, A2)
 
 
 @_jit(inline="always")
-def _horizon_sum(c0, c1, c2, n0, n1, n2, verts, kc):
-    """Lambert's sum for a source seen just above the receiver's horizon, or (False, 0) if
-    some edge rises higher than GRAZING_SINE.
+def _horizon_signed(c0, c1, c2, n0, n1, n2, verts, kc):
+    """Lambert's signed sum (2 pi F up to sign) for a source seen just above the horizon of a
+    receiver with normal n, and the largest squared elevation sine (bound) of its edges; or
+    (False, 0, 0) if some edge rises higher than GRAZING_SINE.
 
     Lambert's edge terms theta_e C_e (C_e the cosine between the edge plane's normal and the
     receiver's) are O(1) near the horizon while F ~ elevation²: their sum cancels. The azimuths
@@ -222,6 +230,7 @@ def _horizon_sum(c0, c1, c2, n0, n1, n2, verts, kc):
     """
     tsum = 0.0
     wsum = 0.0
+    rise2 = 0.0
     for i in range(kc):
         j = i + 1 if i + 1 < kc else 0
         e0 = verts[j, 0] - verts[i, 0]
@@ -245,8 +254,10 @@ def _horizon_sum(c0, c1, c2, n0, n1, n2, verts, kc):
         t = _fmin(1.0, _fmax(0.0, -ae / ee))
         p0, p1, p2 = a0 + t * e0, a1 + t * e1, a2 + t * e2
         hm = _fmax(abs(ha), abs(hb))
-        if hm * hm > _GRAZING2 * (p0 * p0 + p1 * p1 + p2 * p2):
-            return False, 0.0
+        dseg2 = p0 * p0 + p1 * p1 + p2 * p2
+        if hm * hm > _GRAZING2 * dseg2:
+            return False, 0.0, 0.0
+        rise2 = _fmax(rise2, hm * hm / dseg2)
         if not (s2 > (_DEG * _DEG) * (la * lb)):
             continue  # receiver on the edge's line (in the horizon): the term is 0
         s = np.sqrt(s2)
@@ -264,9 +275,62 @@ def _horizon_sum(c0, c1, c2, n0, n1, n2, verts, kc):
             t = np.arctan2(s * (eps - d * X), X * X - eps * X + cabs * s2) + d * theta
             tsum += t if xn > 0.0 else -t
         wsum += dphi
-    winding = np.round(wsum / _TWO_PI)
-    value = abs(_TWO_PI * winding - tsum) * _INV_2PI
-    return True, min(value, 1.0)
+    return True, _TWO_PI * np.round(wsum / _TWO_PI) - tsum, rise2
+
+
+@_jit(inline="always")
+def _near_plane_sum(c0, c1, c2, n0, n1, n2, verts, kc, A0, A1, A2, far_c2, r2max):
+    """F for a receiver near the source's plane and tilted towards it, or (False, 0) if it is not.
+
+    With N the source's unit normal (oriented so that the plane lies at height D > 0 along it)
+    and n = nu N + n_perp, every a_i = a_i|| + D N, so (a_i x a_j) . n_perp = D (N x e) . n_perp:
+
+        2 pi F = |nu S_N + D sum_e theta_e (N x e) . n_perp / |a x e||,
+
+    S_N Lambert's sum for the normal N, from which the source lies just above the horizon (the
+    horizon form keeps it accurate), and the second sum O(D) term by term. Lambert's sum for n
+    instead adds O(nu) terms that cancel to O(D). Used when D is below GRAZING_SINE times the
+    distance to the source and nu² above GRAZING_SINE² (a receiver facing the plane sideways has
+    no cancellation to remove). For a far source (``far_c2`` = |c|², else 0) S_N cancels by
+    distance/size once more, so there only while D |c|² < size³, i.e. the plane nearly through x.
+    """
+    alen = np.sqrt(A0 * A0 + A1 * A1 + A2 * A2)
+    N0, N1, N2 = A0 / alen, A1 / alen, A2 / alen
+    D = 0.0
+    for i in range(kc):
+        D += (c0 + verts[i, 0]) * N0 + (c1 + verts[i, 1]) * N1 + (c2 + verts[i, 2]) * N2
+    D /= kc
+    if D < 0.0:
+        N0, N1, N2, D = -N0, -N1, -N2, -D
+    if far_c2 > 0.0 and not (D * D * far_c2 * far_c2 < r2max * r2max * r2max):
+        return False, 0.0
+    nu = n0 * N0 + n1 * N1 + n2 * N2
+    if not (nu * nu > _GRAZING2):
+        return False, 0.0
+    ok, SN, _ = _horizon_signed(c0, c1, c2, N0, N1, N2, verts, kc)
+    if not ok:
+        return False, 0.0
+    p0, p1, p2 = n0 - nu * N0, n1 - nu * N1, n2 - nu * N2
+    across = 0.0
+    for i in range(kc):
+        j = i + 1 if i + 1 < kc else 0
+        e0 = verts[j, 0] - verts[i, 0]
+        e1 = verts[j, 1] - verts[i, 1]
+        e2 = verts[j, 2] - verts[i, 2]
+        a0, a1, a2 = c0 + verts[i, 0], c1 + verts[i, 1], c2 + verts[i, 2]
+        x0 = a1 * e2 - a2 * e1
+        x1 = a2 * e0 - a0 * e2
+        x2 = a0 * e1 - a1 * e0
+        s2 = x0 * x0 + x1 * x1 + x2 * x2
+        la = a0 * a0 + a1 * a1 + a2 * a2
+        b0, b1, b2 = a0 + e0, a1 + e1, a2 + e2
+        if not (s2 > (_DEG * _DEG) * (la * (b0 * b0 + b1 * b1 + b2 * b2))):
+            continue
+        s = np.sqrt(s2)
+        theta = _atan2p(s, la + (a0 * e0 + a1 * e1 + a2 * e2))
+        ne = (N1 * e2 - N2 * e1) * p0 + (N2 * e0 - N0 * e2) * p1 + (N0 * e1 - N1 * e0) * p2
+        across += theta / s * ne
+    return True, min(abs(nu * SN + D * across) * _INV_2PI, 1.0)
 
 
 @_jit(inline="always")
@@ -560,9 +624,10 @@ def _block_edges(n, k, sc, any_far):
 
 
 @_vjit()
-def _block_finish(n, k, sc, out, lo, redo):
-    """Form factors of lanes 0..n-1; ``redo[u]`` marks the lanes whose source straddles the
-    receiver's plane (``_ff_point`` clips them). Returns how many."""
+def _block_finish(n, k, sc, out, lo, redo, graze):
+    """Form factors of lanes 0..n-1; ``redo[u]`` marks the lanes ``_ff_point`` must finish: the
+    source straddles the receiver's plane, or (with ``graze``) the lane needs a grazing form (see
+    ``_lane_value``). Returns how many."""
     c0, c1, c2 = sc[_ROW_C], sc[_ROW_C + 1], sc[_ROW_C + 2]
     total, A0, A1, A2, r2 = sc[_ROW_TOTAL], sc[_ROW_A], sc[_ROW_A + 1], sc[_ROW_A + 2], sc[_ROW_R2]
     hmin, hmax, d2max = sc[_ROW_HMIN], sc[_ROW_HMAX], sc[_ROW_D2MAX]
@@ -586,7 +651,10 @@ def _block_finish(n, k, sc, out, lo, redo):
             and (hs * hs > (_INPLANE * _INPLANE) * d2max[u] * alen2) and (hmax[u] > 0.0)
         value = abs(total[u]) * _INV_2PI
         low = max(abs(hmin[u]), abs(hmax[u]))
-        flag = live and (hmin[u] < 0.0 or low * low <= _GRAZING2 * d2min[u])
+        an = A0[u] * sc[_ROW_N, u] + A1[u] * sc[_ROW_N + 1, u] + A2[u] * sc[_ROW_N + 2, u]
+        tilted_near = hs * hs <= _GRAZING2 * alen2 * d2min[u] and an * an > _GRAZING2 * alen2
+        low_near = low * low <= _GRAZING2 * d2min[u] or tilted_near
+        flag = live and (hmin[u] < 0.0 or (graze and low_near))
         out[lo + u] = _fmin(value, 1.0) if live else 0.0
         redo[u] = flag
         count += 1 if flag else 0
@@ -598,10 +666,10 @@ def _lambert_block(points, normals, polys, pi, qi, lo, n, mode, out, sc, redo, w
     """out[lo:lo+n] for the pairs (pi, qi)[lo:lo+n], n <= _LANES, with scratch space."""
     k = polys.shape[1]
     kb = _gather(points, normals, polys, pi, qi, lo, n, k, sc)
-    any_far = _block_setup(n, kb, sc, _FAR_RATIO if mode == 0 else 0.0) > 0
+    any_far = _block_setup(n, kb, sc, _FAR_RATIO if mode != 1 else 0.0) > 0
     _block_vertices(n, kb, sc, any_far)
     _block_edges(n, kb, sc, any_far)
-    if _block_finish(n, kb, sc, out, lo, redo):
+    if _block_finish(n, kb, sc, out, lo, redo, mode == 0):
         for u in range(n):
             if redo[u]:
                 out[lo + u] = _ff_point(points, normals, polys, pi[lo + u], qi[lo + u], k, w, h, wc, mode)
@@ -611,7 +679,7 @@ def _lambert_block(points, normals, polys, pi, qi, lo, n, mode, out, sc, redo, w
 def _lambert_indexed_kernel(points, normals, polys, pi, qi, mode, out):
     """out[t] = F(points[pi[t]] -> polys[qi[t]]), in parallel tasks of _BLOCK pairs.
 
-    mode 0: automatic (far formula where the receiver is far); 1: Lambert's raw sum everywhere.
+    mode: see ``_ff_point``.
     """
     m = pi.shape[0]
     k = polys.shape[1]
@@ -689,7 +757,9 @@ _G_HWK = 16  # sum_i w_i . 2A / k: plane offset
 _G_INPLANE = 17  # IN_PLANE_REL^2 |2A|^2
 _G_OK = 18  # 1.0 unless the source is degenerate
 _G_K = 19  # vertex count the source needs (3 for a padded triangle)
-_G_SIZE = 20
+_G_NEAR = 20  # GRAZING_SINE^2 |2A|^2: lanes with hs^2 below it times min |a_i|^2 are near the plane
+_G_GRAZE = 21  # 1.0 where grazing lanes go to _ff_point's grazing forms (mode 0)
+_G_SIZE = 22
 
 
 @_jit()
@@ -711,13 +781,15 @@ def _source_constants(polys, q, mode, g):
     for i in range(1, kb):
         hw += w[i, 0] * A0 + w[i, 1] * A1 + w[i, 2] * A2
     alen2 = A0 * A0 + A1 * A1 + A2 * A2
-    far2 = _FAR_RATIO * _FAR_RATIO if mode == 0 else 0.0
+    far2 = _FAR_RATIO * _FAR_RATIO if mode != 1 else 0.0
     g[_G_A], g[_G_A + 1], g[_G_A + 2] = A0, A1, A2
-    g[_G_BOUND] = far2 * r2 if mode == 0 else np.inf
+    g[_G_BOUND] = far2 * r2 if mode != 1 else np.inf
     g[_G_HWK] = hw / kb
     g[_G_INPLANE] = (_INPLANE * _INPLANE) * alen2
     g[_G_OK] = 1.0 if (alen2 > (_DEG * _DEG) * r2 * r2 and r2 > 0.0) else 0.0
     g[_G_K] = kb
+    g[_G_NEAR] = _GRAZING2 * alen2
+    g[_G_GRAZE] = 1.0 if mode == 0 else 0.0
     return kb
 
 
@@ -765,13 +837,17 @@ def _far_vertex(c0, c1, c2, w0, w1, w2, la, cabs):
 
 
 @_jit(inline="always")
-def _lane_value(total, hs, hmin, hmax, d2max, rise, inplane, ok):
-    """The stored value: the form factor, 0 (degenerate or edge-on), or -1 for ``_ff_point``
-    (the source must be clipped, or every vertex is within GRAZING_SINE of the horizon: rise =
-    max_i h_i² - GRAZING_SINE² |a_i|² <= 0)."""
+def _lane_value(total, hs, hmin, hmax, d2max, d2min, rise, an, inplane, near, graze, ok):
+    """The stored value: the form factor, 0 (degenerate or edge-on), or -1 for ``_ff_point``,
+    which handles what the lane loops do not: sources that must be clipped (hmin < 0), sources
+    whose every vertex is within GRAZING_SINE of the horizon (rise = max_i h_i² - GRAZING_SINE²
+    |a_i|² <= 0) and receivers near the source's plane and tilted towards it (hs² below
+    GRAZING_SINE² |2A|² d2min and (n . 2A)² above GRAZING_SINE² |2A|²). The last two only with
+    ``graze`` (mode 0); ``_ff_point`` decides which form serves."""
     live = ok and (hs * hs > inplane * d2max) and (hmax > 0.0)
     value = _fmin(abs(total) * _INV_2PI, 1.0)
-    value = -1.0 if (hmin < 0.0 or rise <= 0.0) else value
+    tilted_near = hs * hs <= near * d2min and an * an > near
+    value = -1.0 if (hmin < 0.0 or (graze and (rise <= 0.0 or tilted_near))) else value
     return value if live else 0.0
 
 
@@ -783,6 +859,7 @@ def _triangle_lanes(PT, NT, lo, n, g, row, any_far):
     w20, w21, w22 = g[_G_W + 3], g[_G_W + 4], g[_G_W + 5]
     A0, A1, A2 = g[_G_A], g[_G_A + 1], g[_G_A + 2]
     bound, hwk, inplane, ok = g[_G_BOUND], g[_G_HWK], g[_G_INPLANE], g[_G_OK] > 0.0
+    near, graze = g[_G_NEAR], g[_G_GRAZE] > 0.0
     e10, e11, e12 = w20 - w10, w21 - w11, w22 - w12
     for u in range(n):
         n0, n1, n2 = NT[0, lo + u], NT[1, lo + u], NT[2, lo + u]
@@ -814,7 +891,8 @@ def _triangle_lanes(PT, NT, lo, n, g, row, any_far):
             total += _edge_near(d0, d1, d2, -w20, -w21, -w22, la2, la0, n0, n1, n2)
         rise = _fmax(h0 * h0 - _GRAZING2 * la0, _fmax(h1 * h1 - _GRAZING2 * la1, h2 * h2 - _GRAZING2 * la2))
         row[lo + u] = _lane_value(total, hs, _fmin(h0, _fmin(h1, h2)), _fmax(h0, _fmax(h1, h2)),
-                                  _fmax(la0, _fmax(la1, la2)), rise, inplane, ok)
+                                  _fmax(la0, _fmax(la1, la2)), _fmin(la0, _fmin(la1, la2)), rise,
+                                  A0 * n0 + A1 * n1 + A2 * n2, inplane, near, graze, ok)
 
 
 @_vjit()
@@ -826,6 +904,7 @@ def _quad_lanes(PT, NT, lo, n, g, row, any_far):
     w30, w31, w32 = g[_G_W + 6], g[_G_W + 7], g[_G_W + 8]
     A0, A1, A2 = g[_G_A], g[_G_A + 1], g[_G_A + 2]
     bound, hwk, inplane, ok = g[_G_BOUND], g[_G_HWK], g[_G_INPLANE], g[_G_OK] > 0.0
+    near, graze = g[_G_NEAR], g[_G_GRAZE] > 0.0
     e10, e11, e12 = w20 - w10, w21 - w11, w22 - w12
     e20, e21, e22 = w30 - w20, w31 - w21, w32 - w22
     for u in range(n):
@@ -867,7 +946,8 @@ def _quad_lanes(PT, NT, lo, n, g, row, any_far):
                      _fmax(h2 * h2 - _GRAZING2 * la2, h3 * h3 - _GRAZING2 * la3))
         row[lo + u] = _lane_value(total, hs, _fmin(_fmin(h0, h1), _fmin(h2, h3)),
                                   _fmax(_fmax(h0, h1), _fmax(h2, h3)),
-                                  _fmax(_fmax(la0, la1), _fmax(la2, la3)), rise, inplane, ok)
+                                  _fmax(_fmax(la0, la1), _fmax(la2, la3)), _fmin(_fmin(la0, la1), _fmin(la2, la3)),
+                                  rise, A0 * n0 + A1 * n1 + A2 * n2, inplane, near, graze, ok)
 
 
 @_vjit()

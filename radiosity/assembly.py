@@ -120,7 +120,7 @@ def unoccluded_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndar
                        i: np.ndarray, j: np.ndarray, settings: FillSettings) -> np.ndarray:
     """F(i -> j) without occlusion, each pair to ``settings.formfactor_rtol`` (relative)."""
     return pair_factors(quads, normals, centroid, area, i, j, rtol=settings.formfactor_rtol,
-                        max_points=_tol.PAIR_MAX_POINTS)
+                        max_points=_tol.PAIR_MAX_POINTS, mode="fill")
 
 
 def _classify_both_ways(f, i, j, visibility, half):

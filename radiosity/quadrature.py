@@ -325,7 +325,7 @@ def _evaluate(rquads, rnormals, sources, i, j, order, splits, mode):
     return _weighted_means(pts, rnormals[uniq], w, slot, sources, j, mode)
 
 
-def _weighted_means(pts, nrm, w, slot, sources, j, mode="auto"):
+def _weighted_means(pts, nrm, w, slot, sources, j, mode):
     """sum_q w F(pts[slot, q] -> sources[j]) / sum_q w for each pair (slot, j).
 
     ``pts`` (u, nq, 3) and ``w`` (u, nq) are the points and weights of u receiver pieces,
@@ -431,7 +431,7 @@ def _quarters(rects: np.ndarray) -> np.ndarray:
                      for a, b in ((0, 0), (1, 0), (0, 1), (1, 1))], axis=1)
 
 
-def _root_integrals(quads, normals, sources, i, j, order):
+def _root_integrals(quads, normals, sources, i, j, order, mode):
     """Integrals of F_pt over the whole receiver and its four halves (m, 5), and its area (m,).
 
     Receivers repeat across pairs, so their points are made once per receiver."""
@@ -443,11 +443,11 @@ def _root_integrals(quads, normals, sources, i, j, order):
     pts, w = rect_points(np.repeat(quads[uniq], r, axis=0), np.tile(rects, (len(uniq), 1)), order)
     wsum = w.sum(axis=1)
     slots = (slot[:, None] * r + np.arange(r)).ravel()
-    means = _weighted_means(pts, np.repeat(normals[uniq], r, axis=0), w, slots, sources, np.repeat(j, r))
+    means = _weighted_means(pts, np.repeat(normals[uniq], r, axis=0), w, slots, sources, np.repeat(j, r), mode)
     return (means * wsum[slots]).reshape(-1, r), wsum[slot * r]
 
 
-def _piece_integrals(quads, normals, sources, rec, src, rects, frame, frames, orders):
+def _piece_integrals(quads, normals, sources, rec, src, rects, frame, frames, orders, mode):
     """Integrals of F(x -> sources[src]) over rectangles of frames ``frames[frame]`` (0 is the
     identity) of receivers ``rec``, and the rectangles' areas. ``orders`` are the Gauss orders
     in the identity frame and in the others."""
@@ -461,7 +461,7 @@ def _piece_integrals(quads, normals, sources, rec, src, rects, frame, frames, or
             fr = frames[frame[sl]] if frame[sl[0]] else None
             pts, w = rect_points(quads[rec[sl]], rects[sl], order, fr)
             area[sl] = w.sum(axis=1)
-            out[sl] = _weighted_means(pts, normals[rec[sl]], w, np.arange(len(sl)), sources, src[sl]) * area[sl]
+            out[sl] = _weighted_means(pts, normals[rec[sl]], w, np.arange(len(sl)), sources, src[sl], mode) * area[sl]
     return out, area
 
 
@@ -668,7 +668,7 @@ def _split_pieces(pair, frame, rects, h, split_u, split_v):
     return kid_pair, kid_frame, kid_rect, kid_q
 
 
-def _first_pieces(quads, normals, sources, i, j, height, size, orders, cap):
+def _first_pieces(quads, normals, sources, i, j, height, size, orders, cap, mode):
     """Starting pieces of every pair with their Q and halves: the whole receiver, or for pairs
     with touching source vertices the Duffy grid of :func:`_singular_pieces` (where it fits in
     the pair's budget ``cap``).
@@ -686,13 +686,13 @@ def _first_pieces(quads, normals, sources, i, j, height, size, orders, cap):
     s_pair, s_rect, s_frame, duffy = s_pair[fits], s_rect[fits], s_frame[fits], duffy[fits]
     plain = np.flatnonzero(np.bincount(s_pair, minlength=m) == 0)
     area = np.zeros(m)
-    values, area[plain] = _root_integrals(quads, normals, sources, i[plain], j[plain], orders[0])
+    values, area[plain] = _root_integrals(quads, normals, sources, i[plain], j[plain], orders[0], mode)
     s_id = np.where(duffy, np.cumsum(duffy), 0)  # plain cells stay in the identity frame 0
     frames = np.concatenate([_IDENTITY_FRAME[None], s_frame[duffy]])
     todo = np.concatenate([s_rect[:, None, :], _halves(s_rect)], axis=1).reshape(-1, 4)
     owner = np.repeat(s_pair, 5)
     s_values, s_area = _piece_integrals(quads, normals, sources, i[owner], j[owner], todo, np.repeat(s_id, 5),
-                                        frames, orders)
+                                        frames, orders, mode)
     np.add.at(area, s_pair, s_area[::5])
     pair = np.concatenate([plain, s_pair])
     frame = np.concatenate([np.zeros(len(plain), dtype=np.int64), s_id])
@@ -727,7 +727,7 @@ def _forced_near_misses(quads, sources, i, j, height, pair, frame, rects, frames
     return force_u, force_v & ~at_vertex
 
 
-def _adaptive_factors(quads, normals, sources, i, j, *, rtol, cap, size):
+def _adaptive_factors(quads, normals, sources, i, j, *, rtol, cap, size, mode):
     """F(i -> j) of near pairs by adaptive refinement of receiver pieces.
 
     ``cap`` (m,) is each pair's budget of receiver points, ``size`` (m,) its scale (receiver plus
@@ -749,7 +749,7 @@ def _adaptive_factors(quads, normals, sources, i, j, *, rtol, cap, size):
     collapsed = (np.linalg.norm(quads[i, 2] - corner, axis=1) <= _TOUCH_REL * size) & (
         (height == 0) & (np.linalg.norm(sources[j] - corner[:, None, :], axis=2) <= _TOUCH_REL * size[:, None])).any(axis=1)
     pair, frame, rects, q, h, frames, area = _first_pieces(quads, normals, sources, i, j, height, size, orders,
-                                                           cap)
+                                                           cap, mode)
     points = np.where(frame == 0, orders[0] ** 2, orders[1] ** 2)  # per rectangle, by frame
     used = np.bincount(pair, 5 * points, minlength=m).astype(np.int64)
     frame_area = _map_frame(frames, np.full((len(frames), 1), 0.5), np.full((len(frames), 1), 0.5))[2][:, 0]
@@ -781,24 +781,24 @@ def _adaptive_factors(quads, normals, sources, i, j, *, rtol, cap, size):
         used += np.bincount(pair[split], cost[split], m).astype(np.int64)
         pair, frame, rects, q = _split_pieces(pair[split], frame[split], rects[split], h[split],
                                               split_u[split], split_v[split])
-        q, h = _complete_pieces(quads, normals, sources, i[pair], j[pair], frame, rects, q, frames, orders)
+        q, h = _complete_pieces(quads, normals, sources, i[pair], j[pair], frame, rects, q, frames, orders, mode)
         points = np.where(frame == 0, orders[0] ** 2, orders[1] ** 2)
     converged = (done_err <= rtol * np.abs(done_val) + atol) & ~starved
     return done_val / np.where(area > 0, area, 1.0), used, converged
 
 
-def _complete_pieces(quads, normals, sources, rec, src, frame, rects, q, frames, orders):
+def _complete_pieces(quads, normals, sources, rec, src, frame, rects, q, frames, orders, mode):
     """Q where missing (NaN) and the four halves' integrals (n, 4) of new pieces."""
     unknown = np.flatnonzero(np.isnan(q))
     todo = np.concatenate([rects[unknown], _halves(rects).reshape(-1, 4)])
     owner = np.concatenate([unknown, np.repeat(np.arange(len(rects)), 4)])
-    vals, _ = _piece_integrals(quads, normals, sources, rec[owner], src[owner], todo, frame[owner], frames, orders)
+    vals, _ = _piece_integrals(quads, normals, sources, rec[owner], src[owner], todo, frame[owner], frames, orders, mode)
     q = q.copy()
     q[unknown] = vals[:len(unknown)]
     return q, vals[len(unknown):].reshape(-1, 4)
 
 
-def _clipped_receivers(quads, normals, srcs, i, j, height, *, rtol, max_points):
+def _clipped_receivers(quads, normals, srcs, i, j, height, *, rtol, max_points, mode):
     """F(i -> j) for receivers straddling the source's plane: only their front part counts.
 
     Each receiver is clipped to height >= 0 above the source's plane (up to 5 vertices),
@@ -819,7 +819,7 @@ def _clipped_receivers(quads, normals, srcs, i, j, height, *, rtol, max_points):
     pieces = np.concatenate([pieces, pieces[:, 2:3]], axis=1)
     p_cen, p_area = centroids_and_areas(pieces)
     f, info = pair_factors(pieces, normals[i[pair]], p_cen, p_area, np.arange(len(pair)), j[pair], rtol=rtol,
-                           sources=srcs, return_info=True, max_points=max_points, _clipped=True)
+                           sources=srcs, return_info=True, max_points=max_points, mode=mode, _clipped=True)
     out = np.zeros(len(i))
     np.add.at(out, pair, f * p_area)
     used = np.zeros(len(i), dtype=np.int64)
@@ -836,7 +836,8 @@ def _src_normals(polys: np.ndarray) -> np.ndarray:
 
 
 def pair_factors(quads, normals, centroid, area, i, j, *, rtol: float = 1e-6, sources=None,
-                 return_info: bool = False, max_points: int | None = None, _clipped: bool = False):
+                 return_info: bool = False, max_points: int | None = None, mode: str = "auto",
+                 _clipped: bool = False):
     """Unoccluded F(i -> j) for many patch pairs, each to a relative tolerance.
 
     F(i -> j) = (1/A_i) ∫_{A_i} F_pt(x -> P_j) dA, with Lambert's closed form for the inner
@@ -880,6 +881,11 @@ def pair_factors(quads, normals, centroid, area, i, j, *, rtol: float = 1e-6, so
         source's plane: per part of it). Refinement stops there, unconverged, after spending
         the budget on the worst pieces; the Gauss orders are lowered when even the first
         estimate would not fit. None allows up to 2**20 points.
+    mode : {"auto", "fill"}, default: "auto"
+        The point kernel's mode. ``"fill"`` leaves out its grazing forms (for sources seen just
+        above a receiver point's horizon or nearly edge-on), whose raw-sum stand-in errs by
+        ~1e-16 absolute per point: negligible unless F itself is below ~1e-16 / rtol. The
+        matrix fill uses it; the grazing forms cost it a third of its time on the Cornell box.
 
     Returns
     -------
@@ -941,7 +947,7 @@ def pair_factors(quads, normals, centroid, area, i, j, *, rtol: float = 1e-6, so
     if clipped_here.any():
         sel = np.flatnonzero(clipped_here)
         out[sel], used[sel], converged[sel] = _clipped_receivers(
-            quads, normals, srcs, i[sel], j[sel], h[sel], rtol=rtol, max_points=max_points)
+            quads, normals, srcs, i[sel], j[sel], h[sel], rtol=rtol, max_points=max_points, mode=mode)
     # A-priori orders for separated pairs.
     order = np.zeros(m, dtype=np.int64)
     ok_rho = (rho > 1.5) & ~crossing
@@ -954,14 +960,15 @@ def pair_factors(quads, normals, centroid, area, i, j, *, rtol: float = 1e-6, so
     order[clipped_here] = -1  # already integrated piecewise
     for p in np.unique(order[order > 0]):
         sel = np.flatnonzero(order == p)
-        out[sel] = _evaluate(quads, normals, srcs, i[sel], j[sel], int(p), 1, "auto")
+        out[sel] = _evaluate(quads, normals, srcs, i[sel], j[sel], int(p), 1, mode)
         used[sel] = p * p
     # Adaptive refinement for the rest.
     near = np.flatnonzero(order == 0)
     if len(near):
         cap = np.broadcast_to(_ADAPT_MAX_POINTS if max_points is None else max_points, m)[near]
         out[near], used[near], converged[near] = _adaptive_factors(
-            quads, normals, srcs, i[near], j[near], rtol=rtol, cap=cap, size=(r_rec[i] + r_src[j])[near])
+            quads, normals, srcs, i[near], j[near], rtol=rtol, cap=cap, size=(r_rec[i] + r_src[j])[near],
+            mode=mode)
     if return_info:
         return out, {"points": used, "converged": converged}
     return out
