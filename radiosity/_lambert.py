@@ -897,7 +897,11 @@ def _triangle_lanes(PT, NT, lo, n, g, row, any_far):
 
 @_vjit()
 def _quad_lanes(PT, NT, lo, n, g, row, any_far):
-    """row[lo + u] for receivers lo..lo+n-1 against the quad described by ``g``."""
+    """row[lo + u] for receivers lo..lo+n-1 against the quad described by ``g``.
+
+    ``_triangle_lanes`` with a fourth vertex, written out rather than shared: a quad loop fed
+    padded triangles would spend a quarter more on the null edge, and a loop over vertices
+    inside the lane loop would keep LLVM from vectorising it."""
     o0, o1, o2 = g[_G_O], g[_G_O + 1], g[_G_O + 2]
     w10, w11, w12 = g[_G_W], g[_G_W + 1], g[_G_W + 2]
     w20, w21, w22 = g[_G_W + 3], g[_G_W + 4], g[_G_W + 5]

@@ -49,7 +49,9 @@ FAR_SERIES_SINE = 0.03
 # far above the receiver's horizon) uses the horizon form of Lambert's sum: per edge the small
 # difference between its azimuth swept and its Lambert term, plus 2π times the winding number.
 # Lambert's raw terms are O(1) there while F ~ elevation², so the raw sum would lose
-# 1/elevation² of its digits (2^8 at 1/16, which the raw sum still affords).
+# 1/elevation² of its digits (2^8 at 1/16, which the raw sum still affords). The same bound,
+# on the receiver's height over the source's plane and on its normal's tilt towards it,
+# selects the near-plane form (_lambert._near_plane_sum).
 GRAZING_SINE = 1.0 / 16.0
 
 # Receiver-triangle pairs handed to one parallel task of the numba kernels.
