@@ -95,18 +95,57 @@ def _circumradius(quads: np.ndarray, centroid: np.ndarray) -> np.ndarray:
 def candidate_pairs(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, rows: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray]:
     """Pairs (i in rows, j) that face each other: some of j is in front of i and vice versa."""
-    n = len(quads)
-    offset_i = np.einsum("nc,nc->n", normals, centroid)
-    # height of every vertex of j above plane i: (rows, n, 4)
-    h_ji = np.einsum("rc,nkc->rnk", normals[rows], quads) - offset_i[rows, None, None]
-    h_ij = np.einsum("nc,rkc->rnk", normals, quads[rows]) - offset_i[None, :, None]
+    offset = np.einsum("nc,nc->n", normals, centroid)
     scale = _circumradius(quads, centroid)
-    tol = 1e-9 * (scale[rows, None] + scale[None, :])
-    ok = (h_ji.max(axis=2) > tol) & (h_ij.max(axis=2) > tol)
-    ok[np.arange(len(rows)), rows] = False
+    ok = np.empty((len(rows), len(quads)), dtype=bool)
+    (_facing_loop if _HAVE_NUMBA else _facing_numpy)(quads, normals, offset, scale, rows, ok)
     r, j = np.nonzero(ok)
-    del n
     return rows[r], j
+
+
+def _facing_numpy(quads, normals, offset, scale, rows, ok):
+    """ok[r, j]: a vertex of j lies more than 1e-9 (size_i + size_j) in front of rows[r]'s plane,
+    and one of rows[r] in front of j's (numpy: the reference, and the fallback)."""
+    h_ji = np.einsum("rc,nkc->rnk", normals[rows], quads) - offset[rows, None, None]
+    h_ij = np.einsum("nc,rkc->rnk", normals, quads[rows]) - offset[None, :, None]
+    tol = 1e-9 * (scale[rows, None] + scale[None, :])
+    ok[:] = (h_ji.max(axis=2) > tol) & (h_ij.max(axis=2) > tol)
+    ok[np.arange(len(rows)), rows] = False
+
+
+def _facing_loop(quads, normals, offset, scale, rows, ok):
+    """:func:`_facing_numpy` as a compiled loop over (row, patch) pairs: the numpy form builds
+    two (rows, n, 4) height arrays (0.4 GB and 1 s for the Cornell box's 1,742 patches); the
+    loop stops at the first vertex in front and takes 0.05 s."""
+    n, k = quads.shape[0], quads.shape[1]
+    for r in _prange(len(rows)):
+        i = rows[r]
+        for j in range(n):
+            tol = 1e-9 * (scale[i] + scale[j])
+            front = False
+            for v in range(k):
+                h = normals[i, 0] * quads[j, v, 0] + normals[i, 1] * quads[j, v, 1] + normals[i, 2] * quads[j, v, 2]
+                if h - offset[i] > tol:
+                    front = True
+                    break
+            back = False
+            if front:
+                for v in range(k):
+                    h = normals[j, 0] * quads[i, v, 0] + normals[j, 1] * quads[i, v, 1] + normals[j, 2] * quads[i, v, 2]
+                    if h - offset[j] > tol:
+                        back = True
+                        break
+            ok[r, j] = front and back and j != i
+
+
+try:  # numba comes with the kernels; without it the pairs come from numpy
+    import numba as _numba
+
+    _HAVE_NUMBA = True
+    _prange = _numba.prange
+    _facing_loop = _numba.njit(cache=True, parallel=True, error_model="numpy")(_facing_loop)
+except ImportError:  # pragma: no cover
+    _HAVE_NUMBA = False
 
 
 def _is_near(quads, centroid, i, j, settings: FillSettings) -> np.ndarray:

@@ -222,3 +222,26 @@ def test_inactive_patches_are_left_out_and_nothing_else_changes():
     expected = full.toarray() * active[:, None] * active[None, :]
     np.testing.assert_array_equal(part.toarray(), expected)
     assert stats_part.n_pairs < stats_full.n_pairs
+
+
+def test_facing_pairs_loop_matches_numpy():
+    """candidate_pairs' compiled loop against its numpy form: coplanar, touching, back-to-back and
+    facing patches of the boxes scene, and random patches, give the same pairs."""
+    from test_visibility import boxes_scene
+
+    from radiosity import assembly
+
+    rng = np.random.default_rng(7)
+    random_quads = rng.uniform(-1, 1, (60, 1, 3)) + 0.3 * rng.normal(size=(60, 4, 3))
+    random_quads[:, 3] = random_quads[:, 0] + random_quads[:, 2] - random_quads[:, 1]  # planar
+    for quads in (boxes_scene()[0], random_quads):
+        normals = polygon_normals(quads)
+        centroid, _ = centroids_and_areas(quads)
+        offset = np.einsum("nc,nc->n", normals, centroid)
+        scale = assembly._circumradius(quads, centroid)
+        rows = np.arange(0, len(quads), 2)
+        got, ref = (np.empty((len(rows), len(quads)), dtype=bool) for _ in range(2))
+        assembly._facing_loop(quads, normals, offset, scale, rows, got)
+        assembly._facing_numpy(quads, normals, offset, scale, rows, ref)
+        assert ref.any() and not ref.all()
+        np.testing.assert_array_equal(got, ref)
