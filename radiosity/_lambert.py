@@ -251,13 +251,13 @@ def _horizon_signed(c0, c1, c2, n0, n1, n2, verts, kc):
         # the edge's points are no higher than max(h_a, h_b) and no nearer than the segment
         ae = a0 * e0 + a1 * e1 + a2 * e2
         ee = e0 * e0 + e1 * e1 + e2 * e2
-        t = _fmin(1.0, _fmax(0.0, -ae / ee))
-        p0, p1, p2 = a0 + t * e0, a1 + t * e1, a2 + t * e2
+        nearest = _fmin(1.0, _fmax(0.0, -ae / ee))
+        p0, p1, p2 = a0 + nearest * e0, a1 + nearest * e1, a2 + nearest * e2
         hm = _fmax(abs(ha), abs(hb))
         dseg2 = p0 * p0 + p1 * p1 + p2 * p2
         if hm * hm > _GRAZING2 * dseg2:
             return False, 0.0, 0.0
-        rise2 = _fmax(rise2, hm * hm / dseg2)
+        rise2 = _fmax(rise2, hm * hm / dseg2) if dseg2 > 0.0 else rise2
         if not (s2 > (_DEG * _DEG) * (la * lb)):
             continue  # receiver on the edge's line (in the horizon): the term is 0
         s = np.sqrt(s2)
@@ -781,9 +781,8 @@ def _source_constants(polys, q, mode, g):
     for i in range(1, kb):
         hw += w[i, 0] * A0 + w[i, 1] * A1 + w[i, 2] * A2
     alen2 = A0 * A0 + A1 * A1 + A2 * A2
-    far2 = _FAR_RATIO * _FAR_RATIO if mode != 1 else 0.0
     g[_G_A], g[_G_A + 1], g[_G_A + 2] = A0, A1, A2
-    g[_G_BOUND] = far2 * r2 if mode != 1 else np.inf
+    g[_G_BOUND] = (_FAR_RATIO * _FAR_RATIO) * r2 if mode != 1 else np.inf  # mode 1: never far
     g[_G_HWK] = hw / kb
     g[_G_INPLANE] = (_INPLANE * _INPLANE) * alen2
     g[_G_OK] = 1.0 if (alen2 > (_DEG * _DEG) * r2 * r2 and r2 > 0.0) else 0.0
