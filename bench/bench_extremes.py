@@ -38,63 +38,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.append(str(Path(__file__).resolve().parents[1]))  # after PYTHONPATH: lets a checkout be measured
 from _common import RESULTS, parse_args, print_table, write_json  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from helpers import lambert_mp  # noqa: E402  (the tests' reference too)
+from helpers import mp_vector as _mpv, vec_cross as _cross, vec_dot as _dot, vec_sub as _sub  # noqa: E402
+
 # ------------------------------------------------------------------------------------ references
 DPS = 40
-
-
-def _mpv(v):
-    return [c if isinstance(c, mp.mpf) else mp.mpf(float(c)) for c in v]
-
-
-def _sub(a, b):
-    return [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-
-
-def _dot(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def _cross(a, b):
-    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-
-
-def lambert_mp(x, n, poly, dps=DPS):
-    """Form factor from the point ``x`` (normal ``n``, need not be unit) to ``poly`` in mpmath.
-
-    The polygon is clipped to the receiver's upper half-space first; a receiver in the
-    polygon's plane gets 0 (the source is seen edge-on). Returns an mpf.
-    """
-    with mp.workdps(dps):
-        x, n = _mpv(x), _mpv(n)
-        nn = mp.sqrt(_dot(n, n))
-        n = [c / nn for c in n]
-        rel = [_sub(_mpv(p), x) for p in poly]
-        k = len(rel)
-        # receiver in the source's plane: exactly zero (Newell normal, exact in mpmath)
-        N = [mp.mpf(0)] * 3
-        for i in range(k):
-            c = _cross(rel[i], rel[(i + 1) % k])
-            N = [N[0] + c[0], N[1] + c[1], N[2] + c[2]]
-        if _dot(N, N) == 0 or _dot(N, rel[0]) == 0:
-            return mp.mpf(0)
-        h = [_dot(p, n) for p in rel]
-        clipped = []
-        for i in range(k):
-            j = (i + 1) % k
-            if h[i] >= 0:
-                clipped.append(rel[i])
-            if (h[i] > 0 > h[j]) or (h[i] < 0 < h[j]):
-                t = h[i] / (h[i] - h[j])
-                clipped.append([rel[i][c] + t * (rel[j][c] - rel[i][c]) for c in range(3)])
-        total = mp.mpf(0)
-        for i in range(len(clipped)):
-            a, b = clipped[i], clipped[(i + 1) % len(clipped)]
-            cr = _cross(a, b)
-            s = mp.sqrt(_dot(cr, cr))
-            if s == 0:
-                continue
-            total += mp.atan2(s, _dot(a, b)) / s * _dot(cr, n)
-        return abs(total) / (2 * mp.pi)
 
 
 def howell_b3(a, b, c):

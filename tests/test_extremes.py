@@ -18,7 +18,8 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from radiosity import point_to_polygon, polygon_to_polygon
-from helpers import parallel_rectangles_mp, perpendicular_rectangles_mp
+from helpers import lambert_mp, parallel_rectangles_mp, perpendicular_rectangles_mp
+from helpers import mp_vector as _mp3
 
 U = 2.0**-53
 Z = np.array([0.0, 0.0, 1.0])
@@ -29,49 +30,6 @@ WALL_X0 = np.array([[0, 0, 0], [0, 1, 0], [0, 1, 1], [0, 0, 1]], float)  # x = 0
 
 
 # ----------------------------------------------------------------------------------- references
-def _mp3(v):
-    return [c if isinstance(c, mp.mpf) else mp.mpf(float(c)) for c in v]
-
-
-def _cross(a, b):
-    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-
-
-def _dot(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def lambert_mp(x, n, poly, dps=40):
-    """Lambert's formula in mpmath on the exact binary inputs, the polygon clipped to the
-    receiver's upper half-space; 0 for a receiver in the polygon's plane. Returns mpf."""
-    with mp.workdps(dps):
-        x, n = _mp3(x), _mp3(n)
-        nn = mp.sqrt(_dot(n, n))
-        n = [c / nn for c in n]
-        rel = [[p[c] - x[c] for c in range(3)] for p in map(_mp3, poly)]
-        k = len(rel)
-        N = [sum(_cross(rel[i], rel[(i + 1) % k])[c] for i in range(k)) for c in range(3)]
-        if _dot(N, N) == 0 or _dot(N, rel[0]) == 0:
-            return mp.mpf(0)
-        h = [_dot(p, n) for p in rel]
-        clipped = []
-        for i in range(k):
-            j = (i + 1) % k
-            if h[i] >= 0:
-                clipped.append(rel[i])
-            if (h[i] > 0 > h[j]) or (h[i] < 0 < h[j]):
-                t = h[i] / (h[i] - h[j])
-                clipped.append([rel[i][c] + t * (rel[j][c] - rel[i][c]) for c in range(3)])
-        total = mp.mpf(0)
-        for i in range(len(clipped)):
-            a, b = clipped[i], clipped[(i + 1) % len(clipped)]
-            cr = _cross(a, b)
-            s = mp.sqrt(_dot(cr, cr))
-            if s:
-                total += mp.atan2(s, _dot(a, b)) / s * _dot(cr, n)
-        return abs(total) / (2 * mp.pi)
-
-
 def condition_mp(x, n, poly):
     """kappa = (L·Σ_points |∇F| + |∇_n F|) / F, L the largest coordinate (see the bench); forward
     differences of 1e-12 L at 30 digits, enough for the one digit a bound needs."""

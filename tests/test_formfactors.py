@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 import radiosity
 from radiosity.formfactors import _lambert_numpy, lambert_indexed, lambert_pairs, polygon_to_polygon
+import helpers
 from helpers import (PARALLEL_SQUARES, UNIT_SQUARE, WALL_X0, corner_point_factor, parallel_rectangles_mp,
                      perpendicular_rectangles_mp, regular_polygon, square_at)
 
@@ -18,20 +19,8 @@ Z = np.array([[0.0, 0.0, 1.0]])
 
 
 def lambert_mp(x, n, poly, dps=40):
-    """Lambert's formula in mpmath (polygon entirely above the receiver's plane)."""
-    with mp.workdps(dps):
-        x = [mp.mpf(float(v)) for v in x]
-        n = [mp.mpf(float(v)) for v in n]
-        rel = [[mp.mpf(float(v)) - x[c] for c, v in enumerate(p)] for p in poly]
-        total = mp.mpf(0)
-        for i in range(len(rel)):
-            a, b = rel[i], rel[(i + 1) % len(rel)]
-            cr = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-            s = mp.sqrt(sum(c * c for c in cr))
-            if s == 0:
-                continue
-            total += mp.atan2(s, sum(a[c] * b[c] for c in range(3))) / s * sum(cr[c] * n[c] for c in range(3))
-        return float(abs(total) / (2 * mp.pi))
+    """Lambert's formula in mpmath (helpers.lambert_mp), as a float."""
+    return float(helpers.lambert_mp(x, n, poly, dps))
 
 
 def parallel_rectangles(a, b, c):
