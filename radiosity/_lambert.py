@@ -47,6 +47,7 @@ _FAR_RATIO = _tol.FAR_FIELD_RATIO
 _SERIES_SINE = _tol.FAR_SERIES_SINE
 _BLOCK = _tol.KERNEL_BLOCK
 _GRAZING2 = _tol.GRAZING_SINE * _tol.GRAZING_SINE
+_NONPLANAR_REL = 1e-9  # a source whose vertices leave its plane by more (times its radius) is not flat
 _INV_2PI = 1.0 / _TWO_PI
 
 
@@ -297,9 +298,14 @@ def _near_plane_sum(c0, c1, c2, n0, n1, n2, verts, kc, A0, A1, A2, far_c2, r2max
     alen = np.sqrt(A0 * A0 + A1 * A1 + A2 * A2)
     N0, N1, N2 = A0 / alen, A1 / alen, A2 / alen
     D = 0.0
+    lo, hi = np.inf, -np.inf
     for i in range(kc):
         D += (c0 + verts[i, 0]) * N0 + (c1 + verts[i, 1]) * N1 + (c2 + verts[i, 2]) * N2
+        off = verts[i, 0] * N0 + verts[i, 1] * N1 + verts[i, 2] * N2
+        lo, hi = _fmin(lo, off), _fmax(hi, off)
     D /= kc
+    if not (hi - lo <= _NONPLANAR_REL * np.sqrt(r2max)):
+        return False, 0.0  # not planar (outside the contract): the decomposition needs a_i . N = D
     if D < 0.0:
         N0, N1, N2, D = -N0, -N1, -N2, -D
     if far_c2 > 0.0 and not (D * D * far_c2 * far_c2 < r2max * r2max * r2max):
