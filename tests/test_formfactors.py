@@ -340,3 +340,34 @@ def test_polygon_to_polygon_rejects_bad_rtol_and_degenerate():
     with pytest.raises(ValueError, match="rtol"):
         polygon_to_polygon(UNIT_SQUARE, square_at(1.0), rtol=0)
     assert polygon_to_polygon(np.zeros((3, 3)), square_at(1.0)) == 0.0
+
+
+@pytest.mark.parametrize("kind", ["triangles", "degenerate", "coplanar", "parallelograms", "non-planar"])
+def test_matrix_and_pair_paths_agree_and_stay_in_range(kind):
+    """point_to_polygons (one-source lane loops) and lambert_pairs (block kernel) on random
+    receivers and polygons 1e-3..1e3 in size, some receivers on vertices or 0..1e-12 off the
+    polygons' plane: never NaN, Inf or outside [0, 1]; equal to 1e-12 except where the input
+    is ill-posed (receivers on a vertex of a non-planar quad, or 1e-12 off a 1e3 plane)."""
+    rng = np.random.default_rng(["triangles", "degenerate", "coplanar", "parallelograms", "non-planar"].index(kind))
+    m, n = 120, 80
+    polys = rng.normal(size=(n, 4, 3)) * 10.0 ** rng.uniform(-3, 3, (n, 1, 1))
+    pts = rng.normal(size=(m, 3)) * 10.0 ** rng.uniform(-3, 3, (m, 1))
+    nrm = rng.normal(size=(m, 3))
+    nrm /= np.linalg.norm(nrm, axis=1)[:, None]
+    if kind == "triangles":
+        polys[:, 3] = polys[:, 2]
+    elif kind == "degenerate":
+        polys[:, 2], polys[:, 3] = polys[:, 1], polys[:, 0]
+    elif kind == "coplanar":
+        polys[:, :, 2] = 0.0
+        pts[: m // 2, 2] = rng.choice([0.0, 1e-300, -1e-12, 1e-15], m // 2)
+        nrm[::3] = [0, 0, 1.0]
+    elif kind == "parallelograms":
+        polys[:, 3] = polys[:, 0] + polys[:, 2] - polys[:, 1]
+    pts[:10] = polys[rng.integers(0, n, 10), rng.integers(0, 4, 10)]  # receivers on vertices
+    matrix = radiosity.point_to_polygons(pts, nrm, polys)
+    pairs = lambert_pairs(np.repeat(pts, n, 0), np.repeat(nrm, n, 0), np.tile(polys, (m, 1, 1))).reshape(m, n)
+    for f in (matrix, pairs):
+        assert np.isfinite(f).all() and (f >= 0).all() and (f <= 1).all()
+    well_posed = slice(10, None) if kind == "non-planar" else slice(m // 2, None) if kind == "coplanar" else slice(None)
+    np.testing.assert_allclose(matrix[well_posed], pairs[well_posed], rtol=0, atol=1e-12)
