@@ -297,6 +297,9 @@ def _near_plane_sum(c0, c1, c2, n0, n1, n2, verts, kc, A0, A1, A2, far_c2, r2max
     """
     alen = np.sqrt(A0 * A0 + A1 * A1 + A2 * A2)
     N0, N1, N2 = A0 / alen, A1 / alen, A2 / alen
+    nu = n0 * N0 + n1 * N1 + n2 * N2
+    if not (nu * nu > _GRAZING2):
+        return False, 0.0
     D = 0.0
     lo, hi = np.inf, -np.inf
     for i in range(kc):
@@ -307,11 +310,8 @@ def _near_plane_sum(c0, c1, c2, n0, n1, n2, verts, kc, A0, A1, A2, far_c2, r2max
     if not (hi - lo <= _NONPLANAR_REL * np.sqrt(r2max)):
         return False, 0.0  # not planar (outside the contract): the decomposition needs a_i . N = D
     if D < 0.0:
-        N0, N1, N2, D = -N0, -N1, -N2, -D
+        N0, N1, N2, D, nu = -N0, -N1, -N2, -D, -nu
     if far_c2 > 0.0 and not (D * D * far_c2 * far_c2 < r2max * r2max * r2max):
-        return False, 0.0
-    nu = n0 * N0 + n1 * N1 + n2 * N2
-    if not (nu * nu > _GRAZING2):
         return False, 0.0
     ok, SN, _ = _horizon_signed(c0, c1, c2, N0, N1, N2, verts, kc)
     if not ok:
@@ -319,24 +319,30 @@ def _near_plane_sum(c0, c1, c2, n0, n1, n2, verts, kc, A0, A1, A2, far_c2, r2max
     p0, p1, p2 = n0 - nu * N0, n1 - nu * N1, n2 - nu * N2
     across = 0.0
     for i in range(kc):
-        j = i + 1 if i + 1 < kc else 0
-        e0 = verts[j, 0] - verts[i, 0]
-        e1 = verts[j, 1] - verts[i, 1]
-        e2 = verts[j, 2] - verts[i, 2]
-        a0, a1, a2 = c0 + verts[i, 0], c1 + verts[i, 1], c2 + verts[i, 2]
-        x0 = a1 * e2 - a2 * e1
-        x1 = a2 * e0 - a0 * e2
-        x2 = a0 * e1 - a1 * e0
-        s2 = x0 * x0 + x1 * x1 + x2 * x2
-        la = a0 * a0 + a1 * a1 + a2 * a2
-        b0, b1, b2 = a0 + e0, a1 + e1, a2 + e2
-        if not (s2 > (_DEG * _DEG) * (la * (b0 * b0 + b1 * b1 + b2 * b2))):
-            continue
-        s = np.sqrt(s2)
-        theta = _atan2p(s, la + (a0 * e0 + a1 * e1 + a2 * e2))
-        ne = (N1 * e2 - N2 * e1) * p0 + (N2 * e0 - N0 * e2) * p1 + (N0 * e1 - N1 * e0) * p2
-        across += theta / s * ne
+        q, _, _, _, e0, e1, e2 = _edge_q(c0, c1, c2, verts, i, i + 1 if i + 1 < kc else 0)
+        across += q * ((N1 * e2 - N2 * e1) * p0 + (N2 * e0 - N0 * e2) * p1 + (N0 * e1 - N1 * e0) * p2)
     return True, min(abs(nu * SN + D * across) * _INV_2PI, 1.0)
+
+
+@_jit(inline="always")
+def _edge_q(c0, c1, c2, verts, i, j):
+    """Edge i -> j of ``verts`` seen from the receiver (c = o - x): q_e = theta_e / |a_e x e_e|,
+    the cross product a_e x e_e and the edge e_e; q_e = 0 where the receiver lies on the edge's
+    line (the edge plane is undefined, its term is 0) or the edge is null."""
+    e0 = verts[j, 0] - verts[i, 0]
+    e1 = verts[j, 1] - verts[i, 1]
+    e2 = verts[j, 2] - verts[i, 2]
+    a0, a1, a2 = c0 + verts[i, 0], c1 + verts[i, 1], c2 + verts[i, 2]
+    x0 = a1 * e2 - a2 * e1
+    x1 = a2 * e0 - a0 * e2
+    x2 = a0 * e1 - a1 * e0
+    s = np.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+    la = a0 * a0 + a1 * a1 + a2 * a2
+    ae = a0 * e0 + a1 * e1 + a2 * e2
+    b0, b1, b2 = a0 + e0, a1 + e1, a2 + e2
+    lb = b0 * b0 + b1 * b1 + b2 * b2
+    q = _atan2p(s, la + ae) / s if s > _DEG * np.sqrt(la * lb) else 0.0
+    return q, x0, x1, x2, e0, e1, e2
 
 
 @_jit(inline="always")
@@ -344,25 +350,8 @@ def _raw_sum(c0, c1, c2, n0, n1, n2, verts, kc):
     """Lambert's edge sum, sum_e theta_e (a_e x e_e)·n / |a_e x e_e|, for a near polygon."""
     total = 0.0
     for i in range(kc):
-        j = i + 1 if i + 1 < kc else 0
-        e0 = verts[j, 0] - verts[i, 0]
-        e1 = verts[j, 1] - verts[i, 1]
-        e2 = verts[j, 2] - verts[i, 2]
-        if e0 == 0.0 and e1 == 0.0 and e2 == 0.0:
-            continue
-        a0, a1, a2 = c0 + verts[i, 0], c1 + verts[i, 1], c2 + verts[i, 2]
-        x0 = a1 * e2 - a2 * e1
-        x1 = a2 * e0 - a0 * e2
-        x2 = a0 * e1 - a1 * e0
-        s = np.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
-        la = a0 * a0 + a1 * a1 + a2 * a2
-        ae = a0 * e0 + a1 * e1 + a2 * e2
-        b0, b1, b2 = a0 + e0, a1 + e1, a2 + e2
-        lb = b0 * b0 + b1 * b1 + b2 * b2
-        if not (s > _DEG * np.sqrt(la * lb)):
-            continue  # receiver on the edge's line: the edge plane is undefined, its term is 0
-        theta = _atan2p(s, la + ae)
-        total += theta / s * (x0 * n0 + x1 * n1 + x2 * n2)
+        q, x0, x1, x2, _, _, _ = _edge_q(c0, c1, c2, verts, i, i + 1 if i + 1 < kc else 0)
+        total += q * (x0 * n0 + x1 * n1 + x2 * n2)
     value = abs(total) * _INV_2PI
     return min(value, 1.0)
 
@@ -658,8 +647,7 @@ def _block_finish(n, k, sc, out, lo, redo, graze):
         value = abs(total[u]) * _INV_2PI
         low = max(abs(hmin[u]), abs(hmax[u]))
         an = A0[u] * sc[_ROW_N, u] + A1[u] * sc[_ROW_N + 1, u] + A2[u] * sc[_ROW_N + 2, u]
-        tilted_near = hs * hs <= _GRAZING2 * alen2 * d2min[u] and an * an > _GRAZING2 * alen2
-        low_near = low * low <= _GRAZING2 * d2min[u] or tilted_near
+        low_near = low * low <= _GRAZING2 * d2min[u] or _tilted_near(hs, an, _GRAZING2 * alen2, d2min[u])
         flag = live and (hmin[u] < 0.0 or (graze and low_near))
         out[lo + u] = _fmin(value, 1.0) if live else 0.0
         redo[u] = flag
@@ -733,14 +721,21 @@ def _quadrature_kernel(pts, nrm, wts, nq, slot, polys, j, mode, out):
         for lo in range(0, n, _LANES):
             _lambert_block(pts, nrm, polys, pidx, qidx, lo, min(_LANES, n - lo), mode, vals, sc, redo,
                            w, h, wc)
-        for t in range(t0, t1):
-            acc = 0.0
-            wsum = 0.0
-            for r in range(nq):
-                wq = wts[pidx[(t - t0) * nq + r]]
-                acc += wq * vals[(t - t0) * nq + r]
-                wsum += wq
-            out[t] = acc / wsum if wsum > 0.0 else 0.0
+        _pair_means(wts, nq, slot, vals, t0, t1, out)
+
+
+@_jit()
+def _pair_means(wts, nq, slot, vals, t0, t1, out):
+    """out[t] = sum_r wts[slot[t] nq + r] vals[(t - t0) nq + r] / sum_r wts[...] for t0 <= t < t1:
+    each pair's weighted mean over its receiver's nq points."""
+    for t in range(t0, t1):
+        acc = 0.0
+        wsum = 0.0
+        for r in range(nq):
+            wq = wts[slot[t] * nq + r]
+            acc += wq * vals[(t - t0) * nq + r]
+            wsum += wq
+        out[t] = acc / wsum if wsum > 0.0 else 0.0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -762,10 +757,9 @@ _G_BOUND = 15  # far2 * radius^2: lanes with |c|^2 above it are far
 _G_HWK = 16  # sum_i w_i . 2A / k: plane offset
 _G_INPLANE = 17  # IN_PLANE_REL^2 |2A|^2
 _G_OK = 18  # 1.0 unless the source is degenerate
-_G_K = 19  # vertex count the source needs (3 for a padded triangle)
-_G_NEAR = 20  # GRAZING_SINE^2 |2A|^2: lanes with hs^2 below it times min |a_i|^2 are near the plane
-_G_GRAZE = 21  # 1.0 where grazing lanes go to _ff_point's grazing forms (mode 0)
-_G_SIZE = 22
+_G_NEAR = 19  # GRAZING_SINE^2 |2A|^2: lanes with hs^2 below it times min |a_i|^2 are near the plane
+_G_GRAZE = 20  # 1.0 where grazing lanes go to _ff_point's grazing forms (mode 0)
+_G_SIZE = 21
 
 
 @_jit()
@@ -792,7 +786,6 @@ def _source_constants(polys, q, mode, g):
     g[_G_HWK] = hw / kb
     g[_G_INPLANE] = (_INPLANE * _INPLANE) * alen2
     g[_G_OK] = 1.0 if (alen2 > (_DEG * _DEG) * r2 * r2 and r2 > 0.0) else 0.0
-    g[_G_K] = kb
     g[_G_NEAR] = _GRAZING2 * alen2
     g[_G_GRAZE] = 1.0 if mode == 0 else 0.0
     return kb
@@ -842,6 +835,13 @@ def _far_vertex(c0, c1, c2, w0, w1, w2, la, cabs):
 
 
 @_jit(inline="always")
+def _tilted_near(hs, an, near, d2min):
+    """The receiver is near the source's plane (hs = its height times |2A|) and tilted towards it
+    (an = n . 2A); near = GRAZING_SINE² |2A|², d2min the smallest squared vertex distance."""
+    return hs * hs <= near * d2min and an * an > near
+
+
+@_jit(inline="always")
 def _lane_value(total, hs, hmin, hmax, d2max, d2min, rise, an, inplane, near, graze, ok):
     """The stored value: the form factor, 0 (degenerate or edge-on), or -1 for ``_ff_point``,
     which handles what the lane loops do not: sources that must be clipped (hmin < 0), sources
@@ -851,8 +851,8 @@ def _lane_value(total, hs, hmin, hmax, d2max, d2min, rise, an, inplane, near, gr
     ``graze`` (mode 0); ``_ff_point`` decides which form serves."""
     live = ok and (hs * hs > inplane * d2max) and (hmax > 0.0)
     value = _fmin(abs(total) * _INV_2PI, 1.0)
-    tilted_near = hs * hs <= near * d2min and an * an > near
-    value = -1.0 if (hmin < 0.0 or (graze and (rise <= 0.0 or tilted_near))) else value
+    tilted = _tilted_near(hs, an, near, d2min)  # computed up front: selects, not branches, in the lanes
+    value = -1.0 if (hmin < 0.0 or (graze and (rise <= 0.0 or tilted))) else value
     return value if live else 0.0
 
 
@@ -1017,14 +1017,7 @@ def _quadrature_source_kernel(pts, nrm, wts, nq, slot, polys, j, mode, out):
                 _source_block(PT, NT, lo, min(_SRC_LANES, (te - t0) * nq - lo), polys, j[t], mode, vals, g,
                               w, h, wc)
             t = te
-        for t in range(t0, t1):
-            acc = 0.0
-            wsum = 0.0
-            for r in range(nq):
-                wq = wts[slot[t] * nq + r]
-                acc += wq * vals[(t - t0) * nq + r]
-                wsum += wq
-            out[t] = acc / wsum if wsum > 0.0 else 0.0
+        _pair_means(wts, nq, slot, vals, t0, t1, out)
 
 
 @_jit(parallel=True)

@@ -117,25 +117,21 @@ def _facing_loop(quads, normals, offset, scale, rows, ok):
     """:func:`_facing_numpy` as a compiled loop over (row, patch) pairs: the numpy form builds
     two (rows, n, 4) height arrays (0.4 GB and 1 s for the Cornell box's 1,742 patches); the
     loop stops at the first vertex in front and takes 0.05 s."""
-    n, k = quads.shape[0], quads.shape[1]
     for r in _prange(len(rows)):
         i = rows[r]
-        for j in range(n):
+        for j in range(len(quads)):
             tol = 1e-9 * (scale[i] + scale[j])
-            front = False
-            for v in range(k):
-                h = normals[i, 0] * quads[j, v, 0] + normals[i, 1] * quads[j, v, 1] + normals[i, 2] * quads[j, v, 2]
-                if h - offset[i] > tol:
-                    front = True
-                    break
-            back = False
-            if front:
-                for v in range(k):
-                    h = normals[j, 0] * quads[i, v, 0] + normals[j, 1] * quads[i, v, 1] + normals[j, 2] * quads[i, v, 2]
-                    if h - offset[j] > tol:
-                        back = True
-                        break
-            ok[r, j] = front and back and j != i
+            ok[r, j] = j != i and _some_vertex_in_front(quads, j, normals, offset, i, tol) \
+                and _some_vertex_in_front(quads, i, normals, offset, j, tol)
+
+
+def _some_vertex_in_front(quads, j, normals, offset, i, tol):
+    """Whether a vertex of patch j lies more than ``tol`` in front of patch i's plane."""
+    for v in range(quads.shape[1]):
+        h = normals[i, 0] * quads[j, v, 0] + normals[i, 1] * quads[j, v, 1] + normals[i, 2] * quads[j, v, 2]
+        if h - offset[i] > tol:
+            return True
+    return False
 
 
 try:  # numba comes with the kernels; without it the pairs come from numpy
@@ -143,6 +139,7 @@ try:  # numba comes with the kernels; without it the pairs come from numpy
 
     _HAVE_NUMBA = True
     _prange = _numba.prange
+    _some_vertex_in_front = _numba.njit(cache=True, inline="always")(_some_vertex_in_front)
     _facing_loop = _numba.njit(cache=True, parallel=True, error_model="numpy")(_facing_loop)
 except ImportError:  # pragma: no cover
     _HAVE_NUMBA = False
