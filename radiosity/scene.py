@@ -11,12 +11,13 @@ from pathlib import Path
 import numpy as np
 
 from . import _memory
+from ._checks import duplicate_faces, material_notes
 from ._errors import RadiosityWarning, SceneError
 from ._validate import reject_unknown
 from .formfactors import polygon_normals
 from .io.obj import read_obj
 from .imprint import subdivide_imprinted
-from .patches import Patches, planar_parts, subdivide_faces
+from .patches import FaceReport, Patches, planar_parts, subdivide_faces
 from .quadrature import centroids_and_areas
 
 __all__ = ["Scene", "load_scene", "bundled_scene"]
@@ -61,6 +62,8 @@ class Scene:
     # Patches covered by another object (floor under a block, ceiling behind a light; see
     # imprint.py): they can neither receive nor send light. (n,) bool, all False by default.
     patch_hidden: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    # How the MTL's Ke was read: "radiance" (E = pi Ke) or "exitance" (E = Ke); see load_scene.
+    emission_mode: str = "radiance"
 
     def __post_init__(self):
         if len(self.patch_obstruction) != len(self.patch_quads):
@@ -218,12 +221,18 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
         raise ValueError(f"max_patch_size must be a positive number of metres, got {max_patch_size!r}")
     data = read_obj(path)
     vertices = data.vertices * UNITS[units or "m"]
-    _memory.check_patches(vertices, data.faces, max_patch_size)  # refuse before cutting, not during
+    keep, duplicate_notes = duplicate_faces(data.path, data.vertices, data.faces, data.face_line,
+                                            data.face_object, data.objects)
+    kept = np.flatnonzero(keep)
+    faces = [data.faces[k] for k in kept]
+    _memory.check_patches(vertices, faces, max_patch_size)  # refuse before cutting, not during
     if options.get("imprint", True):
-        patches, report, _ = subdivide_imprinted(vertices, data.faces, data.face_object, max_patch_size)
+        patches, report, _ = subdivide_imprinted(vertices, faces, data.face_object[kept], max_patch_size)
     else:
-        patches, report = subdivide_faces(vertices, data.faces, max_patch_size)
-    notes = list(data.warnings) + _units_notes(data, units) + _face_notes(data, report)
+        patches, report = subdivide_faces(vertices, faces, max_patch_size)
+    patches, report = _in_file_faces(patches, report, kept)
+    notes = (list(data.warnings) + _units_notes(data, units) + duplicate_notes + _face_notes(data, report)
+             + material_notes(data.materials))
     if patches.n_patches == 0:
         for note in notes:
             warnings.warn(note, RadiosityWarning, stacklevel=2)
@@ -247,7 +256,16 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
         face_line=data.face_line,
         notes=tuple(notes),
         patch_hidden=patches.patch_hidden,
+        emission_mode=emission,
     )
+
+
+def _in_file_faces(patches: Patches, report: FaceReport, kept: np.ndarray) -> tuple[Patches, FaceReport]:
+    """Patches and face report with face indices of the file (``kept[i]`` is file face of face i)."""
+    if len(kept) and kept[-1] == len(kept) - 1:
+        return patches, report  # nothing was dropped
+    report = FaceReport([int(kept[f]) for f in report.degenerate], [(int(kept[f]), d) for f, d in report.nonplanar])
+    return replace(patches, patch_face=kept[patches.patch_face]), report
 
 
 # A scene larger than this (file units, no units given) is probably in millimetres or centimetres.

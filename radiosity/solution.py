@@ -144,8 +144,16 @@ class Solution:
             "solver": {"method": self.solver.method, "iterations": self.solver.iterations,
                        "residual": self.solver.residual} if self.solver else None,
             "energy_W": self.energy,
+            "emission": emission_reading(scene.emission_mode),
             "notes": list(scene.notes),
         }
+
+
+def emission_reading(mode: str) -> dict[str, str]:
+    """How ``Ke`` was read, for the summary: ``{"ke_read_as": mode, "exitance": formula}``."""
+    if mode == "exitance":
+        return {"ke_read_as": "exitance", "exitance": "E = Ke (W/m^2)"}
+    return {"ke_read_as": "radiance", "exitance": "E = pi * Ke (Ke in W/(m^2 sr))"}
 
 
 def _insert_t_junctions(vertices: np.ndarray, faces: list[np.ndarray], patch_face: np.ndarray,

@@ -40,6 +40,7 @@ def format_summary(solution, load_seconds: float) -> str:
     lines.append(f"solver     {sol['method']}, iterations {sol['iterations']}, residual {max(sol['residual']):.1e}")
     e = s["energy_W"]
     em, ab, es = (np.array(e[k]) for k in ("emitted", "absorbed", "escaped"))
+    lines.append("emission   " + _emission_line(s["emission"]["ke_read_as"]))
     lines.append("energy (W) emitted " + fmt3(em) + "  absorbed " + fmt3(ab) + "  escaped " + fmt3(es))
     lines.append(f"{'object':<16}{'radiosity R':>12}{'G':>10}{'B':>10}   W/m^2")
     for name, (r, g, b) in s["objects"].items():
@@ -47,6 +48,12 @@ def format_summary(solution, load_seconds: float) -> str:
     for note in s["notes"]:
         lines.append(f"note: {note}")
     return "\n".join(lines)
+
+
+def _emission_line(mode: str) -> str:
+    if mode == "exitance":
+        return "Ke read as exitance: E = Ke W/m^2 (--emission radiance reads it as radiance, E = pi Ke)"
+    return "Ke read as radiance in W/(m^2 sr): E = pi Ke (--emission exitance reads it as E)"
 
 
 def fmt3(v) -> str:

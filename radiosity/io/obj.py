@@ -51,6 +51,9 @@ class Material:
     where: str = ""  # file:line of its newmtl
     kd_where: str = ""  # file:line of its Kd (errors about the value point there)
     ke_where: str = ""
+    # Statements radiosity does not model (Ka, Ks, Ns, Ni, Tf, d, Tr, illum, ...), as written
+    # ({keyword: values text}); scene.py turns the meaningful ones into notes.
+    ignored: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass
@@ -170,6 +173,8 @@ def read_mtl(path: Path, referenced_from: str = "", notes: list[str] | None = No
                 values = values * 3
             setattr(current, keyword.lower(), tuple(values))
             setattr(current, f"{keyword.lower()}_where", where)
+        elif current is not None:
+            current.ignored[keyword] = " ".join(tokens)
     return materials
 
 
@@ -195,6 +200,56 @@ def _mtl_paths(folder: Path, tokens: list[str]) -> list[Path]:
     if len(tokens) == 1 or whole.exists():
         return [whole]
     return [folder / t for t in tokens]
+
+
+@dataclass
+class _GroupLine:
+    """A ``g`` or ``o`` line: where it is and what comes right before it."""
+
+    line: int
+    keyword: str
+    name: str  # "" for a bare g (the default group)
+    at: int  # faces before it
+    run_start: int  # first face after the previous g, o or usemtl line
+    after_faces: bool  # the previous statement (s lines aside) is an f line
+
+
+def _trailing_groups(groups: list[_GroupLine], face_group: list[int]) -> list[int]:
+    """Group lines that name the faces before them; ``face_group`` is changed to match.
+
+    A named g/o line that comes right after an f line and has no faces of its own (the next
+    g/o line or the end of the file follows before any face) names the faces before it, back
+    to the previous g, o or usemtl line. Taking those faces can leave the group line before it
+    empty in turn, so the lines are visited from the last to the first. Files that name each
+    group before its faces never have an empty group right after faces, and are unchanged.
+    """
+    owner = np.asarray(face_group, dtype=np.int64)
+    counts = np.bincount(owner + 1, minlength=len(groups) + 1)[1:]
+    claimed = []
+    for k in range(len(groups) - 1, -1, -1):
+        g = groups[k]
+        if not (g.name and g.after_faces and counts[k] == 0 and g.run_start < g.at):
+            continue
+        donors = owner[g.run_start:g.at]
+        np.subtract.at(counts, donors[donors >= 0], 1)
+        owner[g.run_start:g.at] = k
+        counts[k] = g.at - g.run_start
+        claimed.append(k)
+    face_group[:] = owner.tolist()
+    return sorted(claimed)
+
+
+def _trailing_note(path: Path, groups: list[_GroupLine], claimed: list[int], face_group: list[int],
+                   face_line: list[int]) -> str:
+    last = groups[claimed[-1]]
+    named = []
+    for k in claimed:
+        members = [f for f, owner in enumerate(face_group) if owner == k]
+        named.append(f"'{groups[k].name}' (line {groups[k].line}: {len(members)} face(s), "
+                     f"lines {face_line[members[0]]}-{face_line[members[-1]]})")
+    return (f"{path}:{last.line}: '{last.keyword} {last.name}' comes right after faces and has none of its "
+            f"own: this file names groups after their faces; read {len(claimed)} group line(s) as naming "
+            f"the faces before them, back to the previous g, o or usemtl line: {', '.join(named)}")
 
 
 def read_obj(path) -> ObjData:
@@ -233,9 +288,19 @@ def read_obj(path) -> ObjData:
     ignored: dict[str, int] = {}
     current_object = -1
     current_material = -1
+    groups: list[_GroupLine] = []
+    face_group: list[int] = []  # index into groups of the g/o line before each face (-1: none)
+    previous = ""  # keyword of the previous statement (s lines do not count)
+    run_start = 0  # first face after the last g, o or usemtl line
     for number, line in lines:
         keyword, *tokens = line.split()
         where = f"{path}:{number}"
+        if keyword in ("o", "g", "usemtl"):
+            if keyword != "usemtl":
+                groups.append(_GroupLine(number, keyword, " ".join(tokens), len(faces), run_start, previous == "f"))
+            run_start = len(faces)
+        if keyword != "s":
+            previous = keyword
         if keyword == "v":
             xyz = _floats(tokens, 3, where, f"vertex {len(vertices) + 1}")
             if max(abs(c) for c in xyz) > MAX_COORDINATE:
@@ -256,6 +321,7 @@ def read_obj(path) -> ObjData:
                     objects.append(path.stem)
             faces.append(np.asarray(idx, dtype=np.int64))
             face_object.append(current_object)
+            face_group.append(len(groups) - 1)
             face_material.append(current_material)
             face_line.append(number)
         elif keyword in ("o", "g"):
@@ -282,6 +348,12 @@ def read_obj(path) -> ObjData:
             ignored[keyword] = ignored.get(keyword, 0) + 1
     if not faces:
         raise SceneError(f"{path}: the scene has no faces (no 'f' lines)")
+    trailing = _trailing_groups(groups, face_group)
+    if trailing:
+        for f, k in enumerate(face_group):
+            if k >= 0:
+                face_object[f] = object_index[groups[k].name or f"unnamed_{groups[k].line}"]
+        notes.append(_trailing_note(path, groups, trailing, face_group, face_line))
 
     # Materials are resolved after the whole file is read: mtllib may come after usemtl.
     used_materials = sorted({m for m in face_material if m >= 0})
