@@ -12,6 +12,7 @@ import numpy as np
 
 from . import _memory
 from ._checks import duplicate_faces, material_notes
+from ._lightpaths import light_path_notes, trace_emitters
 from ._errors import RadiosityWarning, SceneError
 from ._validate import reject_unknown
 from .formfactors import polygon_normals
@@ -64,6 +65,8 @@ class Scene:
     patch_hidden: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     # How the MTL's Ke was read: "radiance" (E = pi Ke) or "exitance" (E = Ke); see load_scene.
     emission_mode: str = "radiance"
+    # Where the emitters' light first lands (front/back of faces, escaped), from _lightpaths.
+    light_paths: dict | None = None
 
     def __post_init__(self):
         if len(self.patch_obstruction) != len(self.patch_quads):
@@ -242,6 +245,11 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
     if not em.any():
         notes.append(f"{data.path}: no face emits light (no material used has Ke > 0); "
                      "the solution is all zero")
+    quads = patches.quads
+    _, area = centroids_and_areas(quads)
+    paths = trace_emitters(quads, polygon_normals(quads), em, area, data.face_object[patches.patch_face],
+                           data.objects, float(np.linalg.norm(np.ptp(quads.reshape(-1, 3), axis=0))))
+    notes += light_path_notes(paths, str(data.path))
     for note in notes:
         warnings.warn(note, RadiosityWarning, stacklevel=2)
     return Scene(
@@ -257,6 +265,7 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
         notes=tuple(notes),
         patch_hidden=patches.patch_hidden,
         emission_mode=emission,
+        light_paths=paths.as_dict() if paths is not None else None,
     )
 
 

@@ -145,6 +145,7 @@ class Solution:
                        "residual": self.solver.residual} if self.solver else None,
             "energy_W": self.energy,
             "emission": emission_reading(scene.emission_mode),
+            "emitter_rays": scene.light_paths,
             "notes": list(scene.notes),
         }
 
