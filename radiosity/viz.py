@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["to_polydata", "tone_map", "render", "scene_camera"]
+__all__ = ["to_polydata", "tone_map", "render", "scene_camera", "parse_camera", "auto_camera", "choose_camera",
+           "Camera"]
 
 # The Cornell box's published camera: position, focal point, up (metres), vertical view angle.
 CORNELL_CAMERA = ((0.278, 0.273, -0.8), (0.278, 0.273, 0.0), (0.0, 1.0, 0.0), 39.3)
@@ -64,6 +66,229 @@ def _render_mesh(solution):
     return mesh
 
 
+@dataclass(frozen=True)
+class Camera:
+    """A pinhole camera: position and focal point (metres), up vector, vertical view angle (degrees).
+
+    ``how`` says where it came from (``--camera``, the OBJ's ``# camera:`` line, or which
+    automatic view), for the summary.
+    """
+
+    position: tuple[float, float, float]
+    focal_point: tuple[float, float, float]
+    up: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    view_angle: float = 40.0
+    how: str = ""
+
+    def as_dict(self) -> dict:
+        return {"position": [float(x) for x in self.position], "focal_point": [float(x) for x in self.focal_point],
+                "up": [float(x) for x in self.up], "view_angle": float(self.view_angle), "how": self.how}
+
+
+# View angle of the automatic views (degrees): the Cornell box's camera is 39.3; inside a
+# closed room a wider lens shows more of it from near a wall.
+_VIEW_ANGLE_OPENING = 40.0
+_VIEW_ANGLE_INSIDE = 70.0
+_VIEW_ANGLE_USER = 50.0
+# A viewpoint is inside a room when at least this share of rays from it hit the fronts of faces.
+_ROOM_FRONT_SHARE = 0.6
+# ... and the room is closed when at most this share escapes (else its open side is looked through).
+_ROOM_OPEN_SHARE = 0.05
+_PROBE_RAYS = 256
+
+
+def parse_camera(text: str, focal_default=None) -> Camera:
+    """A camera from ``X,Y,Z[:TX,TY,TZ[:ANGLE]]`` (metres; angle in degrees, default 50).
+
+    Without a target the camera looks at ``focal_default`` (the scene's centre). The up vector is
+    +y, or +z when looking straight up or down.
+
+    Raises
+    ------
+    ValueError
+        Not three numbers, then optionally three more and an angle, all finite; or the target
+        equals the position.
+    """
+    parts = text.split(":")
+    msg = (f"camera must be 'X,Y,Z' or 'X,Y,Z:TX,TY,TZ' or 'X,Y,Z:TX,TY,TZ:ANGLE' (metres, degrees), got {text!r}")
+    try:
+        vectors = [[float(t) for t in part.split(",")] for part in parts[:2]]
+        angle = float(parts[2]) if len(parts) == 3 else _VIEW_ANGLE_USER
+    except ValueError:
+        raise ValueError(msg) from None
+    if len(parts) > 3 or any(len(v) != 3 for v in vectors) or not np.isfinite(np.concatenate(vectors + [[angle]])).all():
+        raise ValueError(msg)
+    if not 0 < angle < 180:
+        raise ValueError(f"camera view angle must be between 0 and 180 degrees, got {angle:g}")
+    position = tuple(vectors[0])
+    if len(vectors) == 2:
+        focal = tuple(vectors[1])
+        if np.allclose(position, focal):
+            raise ValueError(f"camera target equals its position ({text!r}); give a target elsewhere")
+    else:
+        focal = tuple(focal_default) if focal_default is not None else (0.0, 0.0, 0.0)
+        if np.allclose(position, focal):  # at the centre itself: look along +z
+            focal = (position[0], position[1], position[2] + 1.0)
+    return Camera(position, focal, _up_for(np.subtract(focal, position)), angle, "--camera")
+
+
+def _up_for(direction) -> tuple[float, float, float]:
+    d = np.asarray(direction, float)
+    d = d / max(np.linalg.norm(d), 1e-300)
+    return (0.0, 0.0, 1.0) if abs(d[1]) > 0.98 else (0.0, 1.0, 0.0)
+
+
+def _fibonacci_directions(n: int) -> np.ndarray:
+    """(n, 3) unit vectors spread evenly over the sphere."""
+    k = np.arange(n) + 0.5
+    z = 1 - 2 * k / n
+    phi = np.pi * (1 + 5**0.5) * k
+    r = np.sqrt(1 - z * z)
+    return np.column_stack([r * np.cos(phi), z, r * np.sin(phi)])
+
+
+def _probe(point, directions, triangles, offset):
+    """(front, back, escaped) share of rays from a point, and (n,) hit distances (inf: escaped)."""
+    from ._lightpaths import _first_hits
+
+    origins = np.broadcast_to(point, directions.shape)
+    hit, side = _first_hits(origins, directions, triangles, offset)
+    found = hit >= 0
+    n = len(hit)
+    front = found & (side < 0)
+    return front.sum() / n, (found & ~front).sum() / n, (~found).sum() / n, hit
+
+
+def auto_camera(triangles: np.ndarray) -> Camera | None:
+    """A view that shows the modelled (front) sides: inside a room if the scene is one, else None.
+
+    Parameters
+    ----------
+    triangles : (t, 3, 3) float
+        The scene's triangles, wound counter-clockwise seen from their front, metres.
+
+    Returns
+    -------
+    Camera or None
+        None when no point of the scene's box sees mostly front faces (objects seen from
+        outside): the caller's exterior view shows them.
+
+    Notes
+    -----
+    Rays from 27 points of the scene's bounding box (a 3 x 3 x 3 grid at 25/50/75%) find the one
+    that sees the most front faces. If that share is at least 60%, the scene is a room. A room
+    letting more than 5% of the rays escape (over all the points inside it) is open (the Cornell box's front): the camera looks in
+    through the opening, from outside it, level (y up), with a 40 degree lens framing the room.
+    A closed room is looked at from inside, near the middle of one wall at 60% of the height,
+    across its longest horizontal extent, with a 70 degree lens; a wall spot inside an object is
+    skipped.
+    """
+    pts = triangles.reshape(-1, 3)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    size = hi - lo
+    scale = float(np.linalg.norm(size))
+    if scale == 0:
+        return None
+    offset = 1e-6 * scale
+    directions = _fibonacci_directions(_PROBE_RAYS)
+    grid = np.array([(a, b, c) for a in (0.25, 0.5, 0.75) for b in (0.25, 0.5, 0.75) for c in (0.25, 0.5, 0.75)])
+    best = None
+    escaping = []  # escaping directions seen from every point inside the room
+    for frac in grid[np.argsort(np.abs(grid - 0.5).sum(axis=1), kind="stable")]:  # the centre first
+        point = lo + frac * size
+        front, _, escaped, hit = _probe(point, directions, triangles, offset)
+        if front >= _ROOM_FRONT_SHARE:
+            escaping.append(directions[hit < 0])
+        if best is None or front > best[0] + 1e-9:
+            best = (front, point)
+    front, point = best
+    if front < _ROOM_FRONT_SHARE:
+        return None
+    center = 0.5 * (lo + hi)
+    out = np.concatenate(escaping)
+    # Seen from all the points inside, more than 5% of the rays leave the room: it is open, and
+    # the mean escaping direction points out through the opening (unless it leaks all round).
+    if len(out) > _ROOM_OPEN_SHARE * _PROBE_RAYS * len(escaping) and np.linalg.norm(out.mean(axis=0)) > 0.3:
+        return _through_opening(out.mean(axis=0), lo, hi)
+    return _inside(lo, hi, triangles, offset) or Camera(tuple(point), tuple(center), (0.0, 1.0, 0.0),
+                                                       _VIEW_ANGLE_INSIDE, "inside the room")
+
+
+def _axis(vector) -> np.ndarray:
+    """The coordinate axis (signed unit vector) closest to ``vector``."""
+    k = int(np.argmax(np.abs(vector)))
+    out = np.zeros(3)
+    out[k] = np.sign(vector[k])
+    return out
+
+
+def _through_opening(out: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> Camera:
+    """Look into an open room from outside its opening (``out``: the way light escapes)."""
+    out = _axis(out)  # rooms are built along the axes; a level camera reads best
+    k = int(np.argmax(np.abs(out)))
+    center = 0.5 * (lo + hi)
+    half = 0.5 * (hi - lo)
+    across = max(half[j] for j in range(3) if j != k) * 1.05
+    distance = across / np.tan(np.radians(_VIEW_ANGLE_OPENING / 2))
+    position = center + out * (half[k] + distance)
+    return Camera(tuple(position), tuple(center), _up_for(out), _VIEW_ANGLE_OPENING,
+                  "outside the room's open side, looking in")
+
+
+def _inside(lo, hi, triangles, offset) -> Camera | None:
+    """Near the middle of a wall, looking across the room's longest horizontal extent."""
+    size = hi - lo
+    center = 0.5 * (lo + hi)
+    directions = _fibonacci_directions(_PROBE_RAYS)
+    for k in sorted((0, 2), key=lambda j: -size[j]):
+        for sign in (1.0, -1.0):
+            position = center.copy()
+            position[1] = lo[1] + 0.6 * size[1]
+            position[k] = center[k] - sign * 0.42 * size[k]
+            front, _, _, _ = _probe(position, directions, triangles, offset)
+            if front >= 0.9:
+                focal = center.copy()
+                focal[1] = lo[1] + 0.4 * size[1]
+                return Camera(tuple(position), tuple(focal), (0.0, 1.0, 0.0), _VIEW_ANGLE_INSIDE,
+                              "inside the room, near a wall")
+    return None
+
+
+def choose_camera(solution, camera: Camera | str | None = None) -> Camera | None:
+    """The camera of a picture: ``camera`` if given, else the OBJ's ``# camera:`` line, else
+    :func:`auto_camera`; None means the exterior (isometric) view."""
+    if isinstance(camera, str):
+        camera = parse_camera(camera, focal_default=_center(solution.scene.patch_quads))
+    if camera is not None:
+        return camera
+    hint = scene_camera(solution.scene.source)
+    if hint is not None:
+        position, focal, up, angle = hint
+        return Camera(position, focal, up, angle, "the OBJ's '# camera:' line")
+    from ._lightpaths import _triangles
+
+    visible = ~solution.scene.patch_hidden
+    return auto_camera(_triangles(solution.scene.patch_quads[visible])[0])
+
+
+def _center(quads) -> tuple[float, float, float]:
+    pts = quads.reshape(-1, 3)
+    return tuple(0.5 * (pts.min(axis=0) + pts.max(axis=0)))
+
+
+def apply_camera(plotter, camera: Camera | None) -> None:
+    """Set a pyvista plotter's camera; None: the isometric view from outside."""
+    if camera is None:
+        plotter.camera_position = "iso"
+        plotter.reset_camera()
+        return
+    plotter.camera.position = camera.position
+    plotter.camera.focal_point = camera.focal_point
+    plotter.camera.up = camera.up
+    plotter.camera.view_angle = camera.view_angle
+    plotter.reset_camera_clipping_range()
+
+
 def scene_camera(source: str):
     """Camera written in the OBJ as ``# camera: px py pz fx fy fz ux uy uz fov``, if any."""
     try:
@@ -89,8 +314,12 @@ def _quiet_vtk() -> None:
 
 
 def render(solution, path: str | Path | None = None, *, window_size=(800, 800), exposure: float | None = None,
-           off_screen: bool = True):
-    """Render the solution (radiance B/pi, tone-mapped to sRGB) and save a PNG if ``path``."""
+           off_screen: bool = True, camera: Camera | str | None = None):
+    """Render the solution (radiance B/pi, tone-mapped to sRGB) and save a PNG if ``path``.
+
+    ``camera``: a :class:`Camera` or ``"X,Y,Z[:TX,TY,TZ[:ANGLE]]"``; default: the OBJ's
+    ``# camera:`` line, else a view from inside the room (:func:`auto_camera`), else from outside.
+    """
     import pyvista as pv
 
     _quiet_vtk()
@@ -100,16 +329,7 @@ def render(solution, path: str | Path | None = None, *, window_size=(800, 800), 
     plotter = pv.Plotter(off_screen=off_screen, window_size=list(window_size))
     plotter.set_background("black")
     plotter.add_mesh(mesh, scalars="rgb", rgb=True, lighting=False, show_scalar_bar=False)
-    camera = scene_camera(solution.scene.source)
-    if camera is not None:
-        position, focal, up, angle = camera
-        plotter.camera.position = position
-        plotter.camera.focal_point = focal
-        plotter.camera.up = up
-        plotter.camera.view_angle = angle
-    else:
-        plotter.camera_position = "iso"
-        plotter.reset_camera()
+    apply_camera(plotter, choose_camera(solution, camera))
     if path is not None:
         plotter.screenshot(str(path))
         plotter.close()

@@ -37,6 +37,24 @@ def add_scene_args(parser: argparse.ArgumentParser, *, optional_scene: bool) -> 
     parser.add_argument("--no-cache", action="store_true", help="do not read or write the form-factor cache")
 
 
+def add_camera_arg(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--camera", default=None, metavar="X,Y,Z[:TX,TY,TZ[:ANGLE]]", type=camera_text,
+                        help="picture camera position (metres), optional target (default: the scene's centre) "
+                             "and vertical view angle (degrees, default 50); default: the OBJ's '# camera:' "
+                             "line, else inside the room (through its open side if it has one), else outside")
+
+
+def camera_text(text: str) -> str:
+    """argparse type: a camera the pictures can use (checked now, applied later)."""
+    from ..viz import parse_camera
+
+    try:
+        parse_camera(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
 def load(args):
     path = args.scene if args.scene is not None else bundled_scene("cornell_box")
     options = {"allow_clamp": args.allow_clamp}

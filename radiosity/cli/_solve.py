@@ -11,7 +11,7 @@ import numpy as np
 from .._errors import SceneError
 from ..io.export import atomic_path, staged_outputs, write_ply, write_png, write_summary, write_vtp
 from ..solve import solve
-from ._common import add_scene_args, load, overrides
+from ._common import add_camera_arg, add_scene_args, load, overrides
 
 NAME = "solve"
 HELP = "solve a scene's radiosity and write a picture, meshes and summary.json"
@@ -25,6 +25,7 @@ def add_args(parser) -> None:
     parser.add_argument("--solver", default="auto",
                         choices=("auto", "direct", "bicgstab", "gmres", "jacobi", "gauss-seidel", "progressive"))
     parser.add_argument("--no-picture", action="store_true", help="skip the PNG")
+    add_camera_arg(parser)
     parser.add_argument("--points", type=Path, default=None, metavar="FILE",
                         help="text file of receiver points 'x y z nx ny nz' per line; writes irradiance.csv")
 
@@ -105,7 +106,11 @@ def run(args) -> int:
         write_vtp(solution, stage / "solution.vtp")
         write_ply(solution, stage / "solution.ply")
         if not args.no_picture:
-            summary["exposure"] = write_png(solution, stage / "picture.png")
+            from ..viz import choose_camera
+
+            camera = choose_camera(solution, args.camera)
+            summary["camera"] = camera.as_dict() if camera is not None else {"how": "outside (isometric view)"}
+            summary["exposure"] = write_png(solution, stage / "picture.png", camera=camera)
         if h is not None:
             with atomic_path(stage / "irradiance.csv") as tmp:
                 np.savetxt(tmp, np.column_stack([points, h]), delimiter=",", fmt="%.9g",
