@@ -81,8 +81,9 @@ def run(args) -> int:
     import numpy as np
     import pyvista as pv
 
-    from ..viz import apply_camera, tone_map
+    from ..viz import _quiet_vtk, apply_camera, tone_map
 
+    _quiet_vtk()
     path = args.result / "solution.vtp" if args.result.is_dir() else args.result
     mesh = read_result(path)
     radiance = np.asarray(mesh.point_data["radiosity"]) / np.pi
