@@ -7,9 +7,10 @@ and to catch faces wound the wrong way, we trace a fixed number of rays from the
 directions cosine-distributed about the front normal, as the emitted light is) and classify each
 ray's first hit. The same rays mirrored to the emitters' back sides probe what is behind them.
 
-A plain float64 Möller-Trumbore loop in numpy over chunks of rays x triangles: the ray count is
-fixed (``N_RAYS``), so the cost is linear in the number of triangles and independent of the
-visibility backend.
+A float64 Möller-Trumbore loop over every triangle for each ray (compiled with numba;
+``_first_hits_numpy`` is the reference the tests compare it with): the ray count is fixed
+(``N_RAYS``), so the cost is linear in the number of triangles and independent of the
+visibility backend; loading traces the scene's faces, not its patches.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit, prange
 
 __all__ = ["LightPaths", "trace_emitters", "N_RAYS"]
 
@@ -81,7 +83,55 @@ def _sample_rays(quads, normals, power, rng) -> tuple[np.ndarray, np.ndarray, np
     return origins, directions, patch
 
 
+@njit(cache=True, parallel=True)
+def _first_hits_kernel(origins, directions, v0, e1, e2, offset, hit, side):  # pragma: no cover - compiled
+    for r in prange(len(origins)):
+        ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
+        dx, dy, dz = directions[r, 0], directions[r, 1], directions[r, 2]
+        best_t = np.inf
+        best = -1
+        for k in range(len(v0)):
+            ax, ay, az = e1[k, 0], e1[k, 1], e1[k, 2]
+            bx, by, bz = e2[k, 0], e2[k, 1], e2[k, 2]
+            px, py, pz = dy * bz - dz * by, dz * bx - dx * bz, dx * by - dy * bx
+            det = ax * px + ay * py + az * pz
+            if det == 0.0:
+                continue
+            inv = 1.0 / det
+            sx, sy, sz = ox - v0[k, 0], oy - v0[k, 1], oz - v0[k, 2]
+            u = (sx * px + sy * py + sz * pz) * inv
+            if u < 0.0 or u > 1.0:
+                continue
+            qx, qy, qz = sy * az - sz * ay, sz * ax - sx * az, sx * ay - sy * ax
+            v = (dx * qx + dy * qy + dz * qz) * inv
+            if v < 0.0 or u + v > 1.0:
+                continue
+            t = (bx * qx + by * qy + bz * qz) * inv
+            if offset < t < best_t:
+                best_t = t
+                best = k
+        hit[r] = best
+        if best >= 0:
+            ax, ay, az = e1[best, 0], e1[best, 1], e1[best, 2]
+            bx, by, bz = e2[best, 0], e2[best, 1], e2[best, 2]
+            side[r] = dx * (ay * bz - az * by) + dy * (az * bx - ax * bz) + dz * (ax * by - ay * bx)
+
+
 def _first_hits(origins, directions, triangles, offset) -> tuple[np.ndarray, np.ndarray]:
+    """Index of the first triangle hit by each ray (-1: none) and ``dot(direction, e1 x e2)``
+    (positive: the ray arrives at the triangle's back)."""
+    triangles = np.ascontiguousarray(triangles, dtype=np.float64)
+    v0 = np.ascontiguousarray(triangles[:, 0])
+    e1 = np.ascontiguousarray(triangles[:, 1] - v0)
+    e2 = np.ascontiguousarray(triangles[:, 2] - v0)
+    hit = np.full(len(origins), -1, dtype=np.int64)
+    side = np.zeros(len(origins))
+    _first_hits_kernel(np.ascontiguousarray(origins, dtype=np.float64),
+                       np.ascontiguousarray(directions, dtype=np.float64), v0, e1, e2, float(offset), hit, side)
+    return hit, side
+
+
+def _first_hits_numpy(origins, directions, triangles, offset) -> tuple[np.ndarray, np.ndarray]:
     """Index of the first triangle hit by each ray (-1: none) and ``dot(direction, e1 x e2)``
     (positive: the ray arrives at the triangle's back)."""
     v0 = triangles[:, 0]

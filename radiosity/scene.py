@@ -245,10 +245,7 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
     if not em.any():
         notes.append(f"{data.path}: no face emits light (no material used has Ke > 0); "
                      "the solution is all zero")
-    quads = patches.quads
-    _, area = centroids_and_areas(quads)
-    paths = trace_emitters(quads, polygon_normals(quads), em, area, data.face_object[patches.patch_face],
-                           data.objects, float(np.linalg.norm(np.ptp(quads.reshape(-1, 3), axis=0))))
+    paths = _emitter_paths(data, vertices, faces, kept, emission)
     notes += light_path_notes(paths, str(data.path))
     for note in notes:
         warnings.warn(note, RadiosityWarning, stacklevel=2)
@@ -267,6 +264,22 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
         emission_mode=emission,
         light_paths=paths.as_dict() if paths is not None else None,
     )
+
+
+def _emitter_paths(data, vertices: np.ndarray, faces: list[np.ndarray], kept: np.ndarray, emission: str):
+    """Where the emitters' light first lands (``_lightpaths``), traced on the faces as written
+    (one patch per face, no imprint): the cost does not grow with ``max_patch_size``."""
+    coarse, report = subdivide_faces(vertices, faces, None)
+    coarse, _ = _in_file_faces(coarse, report, kept)
+    if coarse.n_patches == 0:
+        return None
+    ke = np.array([m.ke for m in data.materials] + [(0.0, 0.0, 0.0)], dtype=float).reshape(-1, 3)
+    em = (np.pi if emission == "radiance" else 1.0) * ke[data.face_material[coarse.patch_face]]
+    quads = coarse.quads
+    _, area = centroids_and_areas(quads)
+    scale = float(np.linalg.norm(np.ptp(quads.reshape(-1, 3), axis=0)))
+    return trace_emitters(quads, polygon_normals(quads), em, area, data.face_object[coarse.patch_face],
+                          data.objects, scale)
 
 
 def _in_file_faces(patches: Patches, report: FaceReport, kept: np.ndarray) -> tuple[Patches, FaceReport]:

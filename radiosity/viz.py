@@ -94,7 +94,10 @@ _VIEW_ANGLE_USER = 50.0
 _ROOM_FRONT_SHARE = 0.6
 # ... and the room is closed when at most this share escapes (else its open side is looked through).
 _ROOM_OPEN_SHARE = 0.05
+# Rays per viewpoint: 256, fewer on big scenes (at least 64) so a probe stays near 4e7
+# ray-triangle tests (about a second).
 _PROBE_RAYS = 256
+_PROBE_TESTS = 4e7
 
 
 def parse_camera(text: str, focal_default=None) -> Camera:
@@ -190,7 +193,8 @@ def auto_camera(triangles: np.ndarray) -> Camera | None:
     if scale == 0:
         return None
     offset = 1e-6 * scale
-    directions = _fibonacci_directions(_PROBE_RAYS)
+    n_rays = int(np.clip(_PROBE_TESTS / (27 * max(len(triangles), 1)), 64, _PROBE_RAYS))
+    directions = _fibonacci_directions(n_rays)
     grid = np.array([(a, b, c) for a in (0.25, 0.5, 0.75) for b in (0.25, 0.5, 0.75) for c in (0.25, 0.5, 0.75)])
     best = None
     escaping = []  # escaping directions seen from every point inside the room
@@ -208,9 +212,9 @@ def auto_camera(triangles: np.ndarray) -> Camera | None:
     out = np.concatenate(escaping)
     # Seen from all the points inside, more than 5% of the rays leave the room: it is open, and
     # the mean escaping direction points out through the opening (unless it leaks all round).
-    if len(out) > _ROOM_OPEN_SHARE * _PROBE_RAYS * len(escaping) and np.linalg.norm(out.mean(axis=0)) > 0.3:
+    if len(out) > _ROOM_OPEN_SHARE * n_rays * len(escaping) and np.linalg.norm(out.mean(axis=0)) > 0.3:
         return _through_opening(out.mean(axis=0), lo, hi)
-    return _inside(lo, hi, triangles, offset) or Camera(tuple(point), tuple(center), (0.0, 1.0, 0.0),
+    return _inside(lo, hi, triangles, offset, directions) or Camera(tuple(point), tuple(center), (0.0, 1.0, 0.0),
                                                        _VIEW_ANGLE_INSIDE, "inside the room")
 
 
@@ -235,11 +239,10 @@ def _through_opening(out: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> Camera:
                   "outside the room's open side, looking in")
 
 
-def _inside(lo, hi, triangles, offset) -> Camera | None:
+def _inside(lo, hi, triangles, offset, directions) -> Camera | None:
     """Near the middle of a wall, looking across the room's longest horizontal extent."""
     size = hi - lo
     center = 0.5 * (lo + hi)
-    directions = _fibonacci_directions(_PROBE_RAYS)
     for k in sorted((0, 2), key=lambda j: -size[j]):
         for sign in (1.0, -1.0):
             position = center.copy()
