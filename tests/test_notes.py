@@ -233,6 +233,19 @@ def test_groups_before_their_faces_are_unchanged(tmp_path):
     assert not notes_with(scene, "after their faces")
 
 
+def test_an_empty_object_between_others_names_nothing(tmp_path):
+    """Blender-like: an object without faces (o Light) right after another's faces is not a
+    trailing name: its name matches neither their material nor a usemtl after it."""
+    (tmp_path / "b.mtl").write_text("newmtl Mat\nKd 0.5 0.5 0.5\nnewmtl Mat2\nKd 0.5 0.5 0.5\n")
+    text = ("mtllib b.mtl\no Cube\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl Mat\ns off\nf 1 2 3\no Light\n"
+            "o Sphere\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\nusemtl Mat2\nf 4 5 6 7\n")
+    (tmp_path / "b.obj").write_text(text)
+    scene = load(tmp_path / "b.obj")
+    assert scene.objects == ["Cube", "Sphere"]
+    assert [scene.patch_area[scene.patch_object == k].sum() for k in range(2)] == pytest.approx([0.5, 1.0])
+    assert not notes_with(scene, "after their faces")
+
+
 # --- duplicate faces ---------------------------------------------------------------------------
 
 def test_duplicate_faces_are_dropped_and_opposite_ones_kept(tmp_path):

@@ -212,9 +212,10 @@ class _GroupLine:
     at: int  # faces before it
     run_start: int  # first face after the previous g, o or usemtl line
     after_faces: bool  # the previous statement (s lines aside) is an f line
+    next_material: str = ""  # a usemtl right after it (before any v or f line)
 
 
-def _trailing_groups(groups: list[_GroupLine], face_group: list[int]) -> list[int]:
+def _trailing_groups(groups: list[_GroupLine], face_group: list[int], face_material: list[str]) -> list[int]:
     """Group lines that name the faces before them; ``face_group`` is changed to match.
 
     A named g/o line that comes right after an f line and has no faces of its own (the next
@@ -222,6 +223,11 @@ def _trailing_groups(groups: list[_GroupLine], face_group: list[int]) -> list[in
     to the previous g, o or usemtl line. Taking those faces can leave the group line before it
     empty in turn, so the lines are visited from the last to the first. Files that name each
     group before its faces never have an empty group right after faces, and are unchanged.
+
+    The first such line of a chain must also match its faces: be the file's last g/o line, or
+    share its name with their material, or be followed by a usemtl of their material (McGuire's
+    ``g tallBox`` / ``usemtl tallBox``). An empty object between two others (``o Light`` with
+    no faces) names nothing.
     """
     owner = np.asarray(face_group, dtype=np.int64)
     counts = np.bincount(owner + 1, minlength=len(groups) + 1)[1:]
@@ -229,6 +235,10 @@ def _trailing_groups(groups: list[_GroupLine], face_group: list[int]) -> list[in
     for k in range(len(groups) - 1, -1, -1):
         g = groups[k]
         if not (g.name and g.after_faces and counts[k] == 0 and g.run_start < g.at):
+            continue
+        materials = set(face_material[g.run_start:g.at])
+        emptied = bool(claimed) and claimed[-1] == k + 1  # the line after it took its faces
+        if not (emptied or k == len(groups) - 1 or g.name in materials or g.next_material in materials):
             continue
         donors = owner[g.run_start:g.at]
         np.subtract.at(counts, donors[donors >= 0], 1)
@@ -298,6 +308,8 @@ def read_obj(path) -> ObjData:
         if keyword in ("o", "g", "usemtl"):
             if keyword != "usemtl":
                 groups.append(_GroupLine(number, keyword, " ".join(tokens), len(faces), run_start, previous == "f"))
+            elif groups and previous in ("g", "o", "usemtl") and groups[-1].at == len(faces):
+                groups[-1].next_material = groups[-1].next_material or " ".join(tokens)
             run_start = len(faces)
         if keyword != "s":
             previous = keyword
@@ -348,7 +360,7 @@ def read_obj(path) -> ObjData:
             ignored[keyword] = ignored.get(keyword, 0) + 1
     if not faces:
         raise SceneError(f"{path}: the scene has no faces (no 'f' lines)")
-    trailing = _trailing_groups(groups, face_group)
+    trailing = _trailing_groups(groups, face_group, [material_names[m] if m >= 0 else "" for m in face_material])
     if trailing:
         for f, k in enumerate(face_group):
             if k >= 0:
