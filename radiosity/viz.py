@@ -111,6 +111,13 @@ def parse_camera(text: str, focal_default=None) -> Camera:
     ValueError
         Not three numbers, then optionally three more and an angle, all finite; or the target
         equals the position.
+
+    Examples
+    --------
+    >>> from radiosity.viz import parse_camera
+    >>> camera = parse_camera("0.278,0.273,-0.8:0.278,0.273,0:39.3")
+    >>> camera.position, camera.view_angle
+    ((0.278, 0.273, -0.8), 39.3)
     """
     parts = text.split(":")
     msg = (f"camera must be 'X,Y,Z' or 'X,Y,Z:TX,TY,TZ' or 'X,Y,Z:TX,TY,TZ:ANGLE' (metres, degrees), got {text!r}")
@@ -259,7 +266,19 @@ def _inside(lo, hi, triangles, offset, directions) -> Camera | None:
 
 def choose_camera(solution, camera: Camera | str | None = None) -> Camera | None:
     """The camera of a picture: ``camera`` if given, else the OBJ's ``# camera:`` line, else
-    :func:`auto_camera`; None means the exterior (isometric) view."""
+    :func:`auto_camera`; None means the exterior (isometric) view.
+
+    Parameters
+    ----------
+    solution : Solution
+        Only ``solution.scene`` is used (its source file and patches).
+    camera : Camera or str, optional
+        A camera, or its ``--camera`` text (``X,Y,Z[:TX,TY,TZ[:ANGLE]]``).
+
+    Returns
+    -------
+    Camera or None
+    """
     if isinstance(camera, str):
         camera = parse_camera(camera, focal_default=_center(solution.scene.patch_quads))
     if camera is not None:

@@ -279,6 +279,9 @@ def test_summary_says_how_ke_was_read(tmp_path, capsys, mode):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["emission"]["ke_read_as"] == mode
     assert f"Ke read as {mode}" in stdout
+    rays = summary["emitter_rays"]
+    assert rays["front"] + rays["back"] + rays["escaped"] == pytest.approx(1.0, abs=1e-3)
+    assert f"of {N_RAYS} rays from the emitters: {100 * rays['front']:.0f}% on the front" in stdout
     # The lamp (Ke 10, 0.16 m^2): pi * 10 * 0.16 W as radiance, 10 * 0.16 W as exitance.
     emitted = summary["energy_W"]["emitted"][0]
     assert emitted == pytest.approx((np.pi if mode == "radiance" else 1.0) * 10 * 0.16)

@@ -43,6 +43,11 @@ def format_summary(solution, load_seconds: float) -> str:
     em, ab, es = (np.array(e[k]) for k in ("emitted", "absorbed", "escaped"))
     lines.append("emission   " + _emission_line(s["emission"]["ke_read_as"]))
     lines.append("energy (W) emitted " + fmt3(em) + "  absorbed " + fmt3(ab) + "  escaped " + fmt3(es))
+    rays = s.get("emitter_rays")
+    if rays:
+        # "escaped" above mixes openings and back faces; the emitters' rays tell them apart.
+        lines.append(f"first hit  of {rays['rays']} rays from the emitters: {100 * rays['front']:.0f}% on the front "
+                     f"of faces, {100 * rays['back']:.0f}% on the back (lost), {100 * rays['escaped']:.0f}% escape")
     lines.append(f"{'object':<16}{'radiosity R':>12}{'G':>10}{'B':>10}   W/m^2")
     for name, (r, g, b) in s["objects"].items():
         lines.append(f"{name:<16}{r:>12.4f}{g:>10.4f}{b:>10.4f}")
