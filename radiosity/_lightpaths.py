@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 __all__ = ["LightPaths", "trace_emitters", "N_RAYS"]
 
@@ -29,6 +29,9 @@ N_RAYS = 1024
 _CHUNK = 1_000_000
 # Ray origins leave the surface by this fraction of the scene size; hits nearer are ignored.
 _OFFSET_REL = 1e-6
+# Up to this many ray-triangle tests numpy is as quick as loading the compiled kernel (about
+# 0.5 s once per process), so small scenes never pay for it.
+_NUMPY_TESTS = 4_000_000
 # Fixed seed: the same scene always gives the same shares and notes.
 _SEED = 20261201
 
@@ -83,9 +86,9 @@ def _sample_rays(quads, normals, power, rng) -> tuple[np.ndarray, np.ndarray, np
     return origins, directions, patch
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def _first_hits_kernel(origins, directions, v0, e1, e2, offset, hit, side):  # pragma: no cover - compiled
-    for r in prange(len(origins)):
+    for r in range(len(origins)):  # serial: a threaded kernel takes ~1 s to load per process
         ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
         dx, dy, dz = directions[r, 0], directions[r, 1], directions[r, 2]
         best_t = np.inf
@@ -120,6 +123,13 @@ def _first_hits_kernel(origins, directions, v0, e1, e2, offset, hit, side):  # p
 def _first_hits(origins, directions, triangles, offset) -> tuple[np.ndarray, np.ndarray]:
     """Index of the first triangle hit by each ray (-1: none) and ``dot(direction, e1 x e2)``
     (positive: the ray arrives at the triangle's back)."""
+    if len(origins) * len(triangles) <= _NUMPY_TESTS:
+        return _first_hits_numpy(origins, directions, triangles, offset)
+    return _first_hits_compiled(origins, directions, triangles, offset)
+
+
+def _first_hits_compiled(origins, directions, triangles, offset) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_first_hits` through the compiled kernel."""
     triangles = np.ascontiguousarray(triangles, dtype=np.float64)
     v0 = np.ascontiguousarray(triangles[:, 0])
     e1 = np.ascontiguousarray(triangles[:, 1] - v0)

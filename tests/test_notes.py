@@ -362,14 +362,14 @@ def test_pictures_of_a_closed_room_show_its_inside(tmp_path, capsys):
 
 def test_compiled_first_hits_match_numpy():
     """The compiled ray loop and the numpy reference find the same first hits and sides."""
-    from radiosity._lightpaths import _first_hits, _first_hits_numpy
+    from radiosity._lightpaths import _first_hits_compiled, _first_hits_numpy
 
     rng = np.random.default_rng(3)
     triangles = rng.uniform(-1, 1, (60, 3, 3))
     origins = rng.uniform(-1.5, 1.5, (500, 3))
     directions = rng.normal(size=(500, 3))
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
-    hit, side = _first_hits(origins, directions, triangles, 1e-9)
+    hit, side = _first_hits_compiled(origins, directions, triangles, 1e-9)
     ref_hit, ref_side = _first_hits_numpy(origins, directions, triangles, 1e-9)
     assert (hit >= 0).sum() > 100 and np.array_equal(hit, ref_hit)
     found = hit >= 0
