@@ -7,8 +7,8 @@ and to catch faces wound the wrong way, we trace a fixed number of rays from the
 directions cosine-distributed about the front normal, as the emitted light is) and classify each
 ray's first hit. The same rays mirrored to the emitters' back sides probe what is behind them.
 
-A float64 Möller-Trumbore loop over every triangle for each ray (compiled with numba;
-``_first_hits_numpy`` is the reference the tests compare it with): the ray count is fixed
+A float64 Möller-Trumbore test of every triangle for each ray (numpy on small scenes, a
+compiled numba loop on large ones; the tests compare the two): the ray count is fixed
 (``N_RAYS``), so the cost is linear in the number of triangles and independent of the
 visibility backend; loading traces the scene's faces, not its patches.
 """
