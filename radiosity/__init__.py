@@ -13,12 +13,15 @@ Scene, Solution, Options, PRESETS
 RadiosityError, SceneError, MemoryBudgetError, RadiosityWarning
 """
 
-from ._errors import MemoryBudgetError, RadiosityError, RadiosityWarning, SceneError
-from .formfactors import point_to_polygon, point_to_polygons, polygon_to_polygon
-from .options import PRESETS, Options
-from .scene import Scene, bundled_scene, load_scene
-from .solution import Solution
-from .solve import solve, view_factors
+from ._startup import guard_imports
+
+with guard_imports():  # Ctrl-C during these seconds of imports: one line and exit 130
+    from ._errors import MemoryBudgetError, RadiosityError, RadiosityWarning, SceneError
+    from .formfactors import point_to_polygon, point_to_polygons, polygon_to_polygon
+    from .options import PRESETS, Options
+    from .scene import Scene, bundled_scene, load_scene
+    from .solution import Solution
+    from .solve import solve, view_factors
 
 __all__ = [
     "point_to_polygon",
