@@ -73,3 +73,10 @@ def test_view3d_model_encl_and_sums(tmp_path, capsys):
     np.testing.assert_allclose(data["F"].sum(axis=1), 1.0, atol=1e-5)
     np.testing.assert_allclose(data["area"], [12, 12, 6.7, 10, 7.5, 7.5, 1.8, 1.5], rtol=1e-6)
     np.testing.assert_allclose(data["emissivity"], [0.9] * 6 + [0.6, 0.1], atol=5e-4)
+
+
+def test_outputs_on_one_file_are_refused_before_writing(tmp_path, capsys):
+    out = tmp_path / "F.npz"
+    code = main(["viewfactors", str(CUBE), "-o", str(out), "--vf", str(out)])
+    assert code == 2 and "same file" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []

@@ -26,7 +26,7 @@ base, cmb, emit or name.
 ``base`` names the surface a subsurface lies in (a window in a wall); ``cmb`` the surface it is
 combined with in the output (the pieces of a non-convex wall). What they mean for the scene
 is applied by :func:`radiosity.scene.load_vs3`. Mask (``M``) and null (``N``) surfaces are
-refused.
+refused; ``X`` (coordinate transformation) lines are skipped with a note, as View3D skips them.
 """
 
 from __future__ import annotations
@@ -159,8 +159,8 @@ def read_vs3(path) -> View3DModel:
             model.title = _strip_comment(raw).strip()[1:].strip()
         elif key == "C":
             model.control.update(_control(" ".join(words)[1:]))
-        elif key == "X":
-            raise SceneError(f"{where}: View3D coordinate transformations (X) are not supported")
+        elif key == "X":  # View3D's 3-D reader skips these too
+            model.notes.append(f"{where}: coordinate transformation (X) ignored, as View3D does for 3-D models")
         elif key == "F":
             geometry = words[1].lower() if len(words) > 1 else "3"
             if geometry not in ("3", "3a"):
