@@ -196,3 +196,20 @@ def test_encl_means_closure_under_enforce_auto(room):
     vf = radiosity.compute_view_factors(scene, enforce="auto", cache=False)
     assert vf.enforced == "closure"
     np.testing.assert_allclose(vf.row_sums, 1.0, atol=1e-12)
+
+
+def test_room_as_vs3_and_as_obj_agree(room, tmp_path):
+    """The OBJ of the same room (door and window as objects lying on the wall) is imprinted:
+    the wall under them is hidden. Its object sums equal the View3D model's separated ones."""
+    model = read_vs3(room)
+    lines = [f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in model.vertices]
+    for name, refs in zip(model.names, model.surfaces):
+        lines += [f"o {name}", "f " + " ".join(str(r + 1) for r in refs)]
+    obj = tmp_path / "room.obj"
+    obj.write_text("\n".join(lines) + "\n")
+    with pytest.warns(radiosity.RadiosityWarning):  # no materials, nothing emits
+        as_obj = radiosity.compute_view_factors(radiosity.load_scene(obj), cache=False).grouped("object")
+    as_vs3 = radiosity.compute_view_factors(radiosity.load_scene(room), cache=False).grouped("object")
+    assert as_obj.names == as_vs3.names
+    np.testing.assert_allclose(as_obj.area, as_vs3.area, rtol=1e-12)
+    np.testing.assert_allclose(as_obj.F.toarray(), as_vs3.F.toarray(), atol=1e-7)
