@@ -158,7 +158,9 @@ def check_closed(F: sp.spmatrix, active: np.ndarray, rtol: float, *, names=None,
     if names is not None and patch_object is not None:
         what += f" (object {names[patch_object[worst]]!r})"
     kind = "deficit" if off[worst] > 0 else "surplus"
-    msg = (f"closure refused: the scene is not a closed enclosure: {what} sums to {rows[worst]:.6g} "
-           f"(worst row {kind} {abs(off[worst]):.3g}, more than the fill's error {tolerance:.1g}); "
-           f"{int((off > tolerance).sum())} row(s) fall short; force=True (--force) scales them anyway")
+    short, over = int((off > tolerance).sum()), int((off < -tolerance).sum())
+    msg = (f"closure refused: rows miss 1 by more than the fill's error ({tolerance:.1g}): {what} sums to "
+           f"{rows[worst]:.6g} (worst row {kind} {abs(off[worst]):.3g}); {short} row(s) fall short, {over} exceed 1, "
+           "so this is not a closed enclosure (or the fill lost light there); "
+           "force=True (--force) scales the rows anyway")
     raise NotClosedError(msg)
