@@ -9,7 +9,8 @@ load_scene          -- OBJ + MTL scene cut into patches (Scene)
 bundled_scene       -- path of a scene shipped with the package ("cornell_box", ...)
 solve               -- radiosity solution of a scene (Solution), with presets
 view_factors        -- sparse patch-to-patch view-factor matrix with occlusion
-Scene, Solution, Options, PRESETS
+exchange            -- grey-body radiative exchange (net radiation method): Exchange
+Scene, Solution, Exchange, Options, PRESETS
 RadiosityError, SceneError, MemoryBudgetError, RadiosityWarning
 """
 
@@ -19,6 +20,7 @@ from .options import PRESETS, Options
 from .scene import Scene, bundled_scene, load_scene
 from .solution import Solution
 from .solve import solve, view_factors
+from .exchange import Exchange, exchange
 
 __all__ = [
     "point_to_polygon",
@@ -28,6 +30,8 @@ __all__ = [
     "bundled_scene",
     "solve",
     "view_factors",
+    "exchange",
+    "Exchange",
     "Scene",
     "Solution",
     "Options",
