@@ -290,3 +290,18 @@ def test_rows_over_one_are_refused():
     F = howell_cube_factors(CUBE) * (1 + 10 * CLOSURE_TOL)
     with pytest.raises(ValueError, match="sum to"):
         radiosity.exchange(CUBE, emissivity=0.5, temperature=T_CUBE, view_factors=F)
+
+
+def test_krylov_path_agrees_with_the_direct_solve(monkeypatch):
+    """Large systems go through GMRES (falling back to LU); force it on the cube."""
+    import sys
+
+    module = sys.modules["radiosity.exchange"]
+    F = howell_cube_factors(CUBE)
+    kwargs = dict(emissivity=np.linspace(0.2, 0.9, 6), temperature=[400.0, np.nan, 300, 300, 350, 300],
+                  heat_flux=[np.nan, 100.0, np.nan, np.nan, np.nan, np.nan], view_factors=F)
+    direct = radiosity.exchange(CUBE, **kwargs)
+    monkeypatch.setattr(module, "DIRECT_MAX", 0)
+    krylov = radiosity.exchange(CUBE, **kwargs)
+    np.testing.assert_allclose(krylov.net_flux, direct.net_flux, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(krylov.temperature, direct.temperature, rtol=1e-10)
