@@ -20,6 +20,7 @@ import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Union
 
 import numpy as np
 import scipy.sparse as sp
@@ -47,6 +48,9 @@ SOLVE_RTOL = 1e-10
 DIRECT_MAX = 1500
 
 ENFORCE_MODES = ("auto", "none", "reciprocity", "closure")
+
+# A condition: one value for every patch, {object name: value}, or one value per patch.
+Condition = Union[float, Mapping[str, float], np.ndarray]
 
 
 @dataclass(frozen=True, eq=False)
@@ -153,8 +157,9 @@ class Exchange:
                 "relative": abs(residual) / scale}
 
 
-def exchange(scene: Scene, *, emissivity, temperature=None, heat_flux=None, ambient: float | None = None,
-             view_factors=None, enforce: str = "auto", **options) -> Exchange:
+def exchange(scene: Scene, *, emissivity: Condition, temperature: Condition | None = None,
+             heat_flux: Condition | None = None, ambient: float | None = None,
+             view_factors: sp.spmatrix | np.ndarray | None = None, enforce: str = "auto", **options) -> Exchange:
     """Grey-body radiative exchange between the scene's patches (net radiation method).
 
     Parameters
@@ -229,7 +234,7 @@ def exchange(scene: Scene, *, emissivity, temperature=None, heat_flux=None, ambi
     ambient = _ambient(ambient)
     F = _matrix(scene, view_factors, options)
     idx = np.flatnonzero(active)
-    Fa = F[idx][:, idx].tocsr()
+    Fa = F if len(idx) == scene.n_patches else F[idx][:, idx].tocsr()
     Fa, f_amb = _closed(Fa, scene, idx, ambient, enforce)
     has_T = ~np.isnan(T[idx])
     J = _solve(Fa, eps[idx], T[idx], q[idx], has_T, f_amb, ambient)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -305,3 +307,36 @@ def test_krylov_path_agrees_with_the_direct_solve(monkeypatch):
     krylov = radiosity.exchange(CUBE, **kwargs)
     np.testing.assert_allclose(krylov.net_flux, direct.net_flux, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(krylov.temperature, direct.temperature, rtol=1e-10)
+
+
+@functools.lru_cache(maxsize=None)
+def plates_one_apart():
+    import tempfile
+    from pathlib import Path
+
+    scene = plates(Path(tempfile.mkdtemp()), 1.0)
+    return scene, radiosity.view_factors(scene)
+
+
+temperatures = st.floats(0.0, 1200.0)
+
+
+@settings(max_examples=30)
+@given(e1=st.floats(0.05, 1.0), e2=st.floats(0.05, 1.0), T1=temperatures, T2=temperatures, Ta=temperatures,
+       flux_on_upper=st.booleans())
+def test_open_plates_network_conservation_and_round_trip(e1, e2, T1, T2, Ta, flux_on_upper):
+    scene, F = plates_one_apart()
+    F12 = PARALLEL_SQUARES[1.0]
+    q1, q2 = network_two_plates(F12, e1, e2, T1, T2, Ta)
+    emissivity = {"lower": e1, "upper": e2}
+    if flux_on_upper:  # the upper plate's flux given, its temperature solved for
+        ex = radiosity.exchange(scene, emissivity=emissivity, temperature={"lower": T1}, heat_flux={"upper": q2},
+                                ambient=Ta, view_factors=F)
+    else:
+        ex = radiosity.exchange(scene, emissivity=emissivity, temperature={"lower": T1, "upper": T2},
+                                ambient=Ta, view_factors=F)
+    scale = SIGMA * max(T1, T2, Ta, 1.0) ** 4
+    np.testing.assert_allclose(ex.net_flux, [q1, q2], atol=1e-6 * scale)
+    np.testing.assert_allclose(ex.temperature**4, [T1**4, T2**4], atol=1e-5 * max(T1, T2, Ta, 1.0) ** 4)
+    e = ex.energy_balance()
+    assert abs(e["residual_W"]) <= 1e-12 * scale
