@@ -118,3 +118,10 @@ def test_missing_or_unknown_conditions_file(tmp_path, capsys):
     other.write_text("x: 1\n")
     code = main(["exchange", str(CUBE), "--conditions", str(other), "-o", str(tmp_path / "o")])
     assert_one_line_error(capsys, code, "c.yaml", ".toml or .json")
+
+
+def test_bad_ambient_on_the_command_line(tmp_path, capsys):
+    conditions = tmp_path / "c.toml"
+    conditions.write_text(TOML)
+    code = main(["exchange", str(CUBE), "--conditions", str(conditions), "--ambient", "-5", "-o", str(tmp_path / "o")])
+    assert_one_line_error(capsys, code, "--ambient", "temperature in K")

@@ -15,7 +15,7 @@ from radiosity.exchange import CLOSURE_TOL, STEFAN_BOLTZMANN as SIGMA
 
 pytestmark = pytest.mark.filterwarnings("ignore:.*no face emits light:radiosity.RadiosityWarning")
 
-from helpers import PARALLEL_SQUARES, PERPENDICULAR_SQUARES, parallel_rectangles_mp, square_at, write_obj
+from helpers import BLOCKED_PARALLEL_SQUARES, PARALLEL_SQUARES, PERPENDICULAR_SQUARES, parallel_rectangles_mp, square_at, write_obj
 
 # Meshed spheres: the formula assumes uniform radiosity on each sphere. Measured after closure:
 # 5e-8 (icosahedra), 2e-6 (subdivided once); see docs/exchange.md.
@@ -340,3 +340,26 @@ def test_open_plates_network_conservation_and_round_trip(e1, e2, T1, T2, Ta, flu
     np.testing.assert_allclose(ex.temperature**4, [T1**4, T2**4], atol=1e-5 * max(T1, T2, Ta, 1.0) ** 4)
     e = ex.energy_balance()
     assert abs(e["residual_W"]) <= 1e-12 * scale
+
+
+def test_view3d_obstruction_blocks_and_takes_no_part(tmp_path):
+    """Black plates with a centred blocker from a View3D model: J = sigma T^4 is uniform, so
+    each plate's mean flux is sigma (T^4 - F12 T_other^4 - (1 - F12) T_amb^4) exactly."""
+    from test_view3d import PLATES
+
+    path = tmp_path / "plates.vs3"
+    path.write_text(PLATES)
+    # Cut: with each plate one patch the fill is 9% low (the shadow edge crosses the receiver
+    # patch, see docs/exchange.md); cut at 0.25 it gives F12 to 1e-9.
+    scene = radiosity.load_scene(path, max_patch_size=0.25)
+    T1, T2, Ta = 500.0, 300.0, 280.0
+    with pytest.warns(radiosity.RadiosityWarning, match=r"'obstruction_3' take no part"):
+        ex = radiosity.exchange(scene, emissivity={"lower": 1.0, "upper": 1.0},
+                                temperature={"lower": T1, "upper": T2}, ambient=Ta)
+    F12 = BLOCKED_PARALLEL_SQUARES
+    flux = ex.object_net_flux()
+    assert flux["lower"] == pytest.approx(SIGMA * (T1**4 - F12 * T2**4 - (1 - F12) * Ta**4), rel=1e-6)
+    assert flux["upper"] == pytest.approx(SIGMA * (T2**4 - F12 * T1**4 - (1 - F12) * Ta**4), rel=1e-6)
+    blocker = scene.patch_obstruction
+    assert (ex.net_flux[blocker] == 0).all() and not ex.active[blocker].any() and (ex.prescribed[blocker] == "").all()
+    assert ex.energy_balance()["relative"] < 1e-12

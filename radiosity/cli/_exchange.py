@@ -15,6 +15,7 @@ optional top-level ``ambient`` (K) is the sky or surroundings of an open scene::
 
 from __future__ import annotations
 
+import argparse
 import csv
 import io
 import json
@@ -40,11 +41,22 @@ OBJECT_KEYS = ("emissivity", "temperature", "heat_flux")
 CSV_COLUMNS = ("object", "area_m2", "emissivity", "temperature_K", "net_power_W", "net_flux_W_m2", "prescribed")
 
 
+def kelvin(text: str) -> float:
+    """argparse type: a finite temperature >= 0 K."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"must be a temperature in K (>= 0), got {text!r}")
+    return value
+
+
 def add_args(parser) -> None:
     add_scene_args(parser, optional_scene=False)
     parser.add_argument("--conditions", type=Path, required=True, metavar="FILE",
                         help="TOML or JSON file: emissivity and temperature or heat_flux per object")
-    parser.add_argument("--ambient", type=float, default=None, metavar="K",
+    parser.add_argument("--ambient", type=kelvin, default=None, metavar="K",
                         help="ambient (sky) temperature for an open scene, overriding the file's")
     parser.add_argument("--view-factors", type=Path, default=None, metavar="F.npz",
                         help="use this matrix (from 'radiosity viewfactors') instead of computing it")
