@@ -363,3 +363,42 @@ def test_view3d_obstruction_blocks_and_takes_no_part(tmp_path):
     blocker = scene.patch_obstruction
     assert (ex.net_flux[blocker] == 0).all() and not ex.active[blocker].any() and (ex.prescribed[blocker] == "").all()
     assert ex.energy_balance()["relative"] < 1e-12
+
+
+# --- concentric cylinders (closed by end caps) --------------------------------------------------
+
+def prism(radius: float, length: float, sides: int, *, inward: bool, z0: float = 0.0) -> list[np.ndarray]:
+    """A closed regular prism: walls as quads, caps as triangle fans (facing out, or in)."""
+    t = np.linspace(0, 2 * np.pi, sides, endpoint=False)
+    ring = np.column_stack([radius * np.cos(t), radius * np.sin(t)])
+    polys = []
+    for k in range(sides):
+        a, b = ring[k], ring[(k + 1) % sides]
+        polys.append(np.array([[*a, z0], [*b, z0], [*b, z0 + length], [*a, z0 + length]]))
+    for z, up in ((z0, False), (z0 + length, True)):
+        for k in range(sides):
+            a, b = ring[k], ring[(k + 1) % sides]
+            tri = np.array([[0.0, 0.0, z], [*a, z], [*b, z]])
+            polys.append(tri if up else tri[::-1])
+    return [p[::-1].copy() for p in polys] if inward else polys
+
+
+@pytest.fixture(scope="module")
+def cylinders(tmp_path_factory):
+    objects = {"inner": prism(0.5, 4.0, 12, inward=False), "outer": prism(1.0, 4.8, 12, inward=True, z0=-0.4)}
+    scene = radiosity.load_scene(write_obj(tmp_path_factory.mktemp("cyl") / "cylinders.obj", objects))
+    return scene, radiosity.view_factors(scene)
+
+
+@pytest.mark.parametrize("e1, e2, rtol", [(0.5, 1.0, 1e-9), (0.5, 0.5, 1e-2), (0.2, 0.8, 1e-2)])
+def test_concentric_cylinders_match_the_two_surface_formula(cylinders, e1, e2, rtol):
+    """Convex inner body: q1 = sigma (T1^4 - T2^4) / (1/e1 + (A1/A2)(1/e2 - 1)); exact for a
+    black outer shell, otherwise up to the non-uniform radiosity of 12-sided prisms with caps
+    (measured 1.5e-3 and 2.9e-4)."""
+    scene, F = cylinders
+    A1, A2 = sphere_areas(scene)
+    ex = radiosity.exchange(scene, emissivity={"inner": e1, "outer": e2},
+                            temperature={"inner": 800.0, "outer": 300.0}, view_factors=F, enforce="closure")
+    reference = A1 * SIGMA * (800.0**4 - 300.0**4) / (1 / e1 + (A1 / A2) * (1 / e2 - 1))
+    assert ex.object_net_power()["inner"] == pytest.approx(reference, rel=rtol)
+    assert ex.energy_balance()["relative"] < 1e-12
