@@ -10,7 +10,8 @@ bundled_scene       -- path of a scene shipped with the package ("cornell_box", 
 solve               -- radiosity solution of a scene (Solution), with presets
 view_factors        -- sparse patch-to-patch view-factor matrix with occlusion
 compute_view_factors -- the same with the patches it belongs to, sky factors, sums (ViewFactors)
-Scene, Solution, Options, PRESETS, ViewFactors
+exchange            -- grey-body radiative exchange (net radiation method): Exchange
+Scene, Solution, Exchange, Options, PRESETS, ViewFactors
 RadiosityError, SceneError, MemoryBudgetError, RadiosityWarning
 """
 
@@ -18,6 +19,7 @@ from ._startup import guard_imports
 
 with guard_imports():  # Ctrl-C during these seconds of imports: one line and exit 130
     from ._errors import MemoryBudgetError, RadiosityError, RadiosityWarning, SceneError
+    from .exchange import Exchange, exchange
     from .factors import ViewFactors
     from .formfactors import point_to_polygon, point_to_polygons, polygon_to_polygon
     from .options import PRESETS, Options
@@ -35,6 +37,8 @@ __all__ = [
     "view_factors",
     "compute_view_factors",
     "ViewFactors",
+    "exchange",
+    "Exchange",
     "Scene",
     "Solution",
     "Options",

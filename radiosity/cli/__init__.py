@@ -1,4 +1,4 @@
-"""The ``radiosity`` command: solve, view, viewfactors. ``main(argv)`` returns the exit code.
+"""The ``radiosity`` command: solve, view, viewfactors, exchange. ``main(argv)`` returns the exit code.
 
 Bad input (a ``RadiosityError``, ``ValueError`` or ``OSError``, a request too big for the
 machine, a bad command line) ends with exactly one line on stderr, ``radiosity: error: ...``,
@@ -21,7 +21,7 @@ from .._errors import MemoryBudgetError, RadiosityError, RadiosityWarning
 from .._startup import INTERRUPTED_LINE, PROG, exit_status, guard_imports
 
 with guard_imports():
-    from . import _solve, _view, _viewfactors
+    from . import _exchange, _solve, _view, _viewfactors
 
 __all__ = ["main", "entry"]
 
@@ -47,7 +47,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog=PROG, description=__doc__.splitlines()[0])
     parser.add_argument("--debug", action="store_true", help="show tracebacks for bad input")
     sub = parser.add_subparsers(dest="command", required=True)
-    for module in (_solve, _view, _viewfactors):
+    for module in (_solve, _view, _viewfactors, _exchange):
         p = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP)
         p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                        help="show tracebacks for bad input")
