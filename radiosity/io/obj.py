@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import SceneError
+from ._text import excerpt, parse_float, read_input, split_lines
 
 __all__ = ["ObjData", "Material", "read_obj", "read_mtl", "MAX_COORDINATE"]
 
@@ -75,13 +76,13 @@ class ObjData:
 
 def _floats(tokens: list[str], count: int, where: str, what: str) -> list[float]:
     if len(tokens) < count:
-        raise SceneError(f"{where}: {what} needs {count} numbers, got {len(tokens)}: {' '.join(tokens)!r}")
+        raise SceneError(f"{where}: {what} needs {count} numbers, got {len(tokens)}: {excerpt(' '.join(tokens))!r}")
     try:
-        values = [float(t) for t in tokens[:count]]
+        values = [parse_float(t) for t in tokens[:count]]
     except ValueError:
-        raise SceneError(f"{where}: {what} has a value that is not a number: {' '.join(tokens)!r}") from None
+        raise SceneError(f"{where}: {what} has a value that is not a number: {excerpt(' '.join(tokens))!r}") from None
     if not all(math.isfinite(v) for v in values):
-        raise SceneError(f"{where}: {what} is not finite: {' '.join(tokens)!r}")
+        raise SceneError(f"{where}: {what} is not finite: {excerpt(' '.join(tokens))!r}")
     return values
 
 
@@ -98,7 +99,7 @@ def _read_lines(path: Path, what: str, referenced_from: str = "", notes: list[st
     """(line number, text without comment) of each logical line; continuations joined."""
     origin = f"{referenced_from}: " if referenced_from else ""
     try:
-        data = path.read_bytes()
+        data = read_input(path, what)
     except FileNotFoundError:
         raise SceneError(f"{origin}{what} file '{path}' does not exist") from None
     except IsADirectoryError:
@@ -115,10 +116,7 @@ def _read_lines(path: Path, what: str, referenced_from: str = "", notes: list[st
         text = data.decode("latin-1")
         if notes is not None:
             notes.append(f"{path}: is not UTF-8 (byte {exc.start}); read as Latin-1")
-    if "\n" not in text and "\r" in text:
-        raw_lines = text.split("\r")  # classic Mac line endings
-    else:
-        raw_lines = text.split("\n")
+    raw_lines = split_lines(text)  # CR LF, LF and a lone CR (classic Mac) each end a line
     out: list[tuple[int, str]] = []
     pending: list[str] = []
     start = 0

@@ -39,6 +39,8 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import SceneError
+from ._text import decode, excerpt, parse_float, read_input, split_lines
+from .obj import MAX_COORDINATE
 
 __all__ = ["View3DModel", "SeparatedModel", "read_vs3", "separate_and_combine", "write_vs3"]
 
@@ -93,13 +95,26 @@ def _strip_comment(raw: str) -> str:
     return re.split(r"(?:^|\s)/", text, maxsplit=1)[0]
 
 
+_INTEGER = re.compile(r"[+-]?\d+", re.ASCII)
+
+
 def _number(token: str, where: str, what: str, kind=float):
+    """``token`` as a float (or int), in the ASCII grammar of ``io._text``; SceneError naming it."""
     try:
-        value = kind(token)
+        if kind is int and not _INTEGER.fullmatch(token):
+            raise ValueError(token)
+        value = kind(token) if kind is int else parse_float(token)
     except ValueError:
-        raise SceneError(f"{where}: {what} must be a number, got {token!r}") from None
+        raise SceneError(f"{where}: {what} must be a number, got {excerpt(token)!r}") from None
     if kind is float and not np.isfinite(value):
         raise SceneError(f"{where}: {what} is not finite: {token!r}")
+    return value
+
+
+def _coordinate(token: str, where: str) -> float:
+    value = _number(token, where, "a coordinate")
+    if abs(value) > MAX_COORDINATE:  # beyond it, areas and distances overflow in the kernels
+        raise SceneError(f"{where}: a coordinate is beyond {MAX_COORDINATE:g}: {excerpt(token)!r}")
     return value
 
 
@@ -136,11 +151,11 @@ def read_vs3(path) -> View3DModel:
     """
     path = Path(path)
     try:
-        lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
+        lines = split_lines(decode(read_input(path, "View3D")))
     except FileNotFoundError:
         raise SceneError(f"View3D file '{path}' does not exist") from None
     except OSError as exc:
-        raise SceneError(f"cannot read View3D file '{path}': {exc.strerror}") from None
+        raise SceneError(f"cannot read View3D file '{path}': {exc.strerror or exc}") from None
     model = View3DModel(path)
     vertices: list[list[float]] = []
     geometry = "3"
@@ -171,7 +186,7 @@ def read_vs3(path) -> View3DModel:
             n = _number(words[1], where, "vertex number", int)
             if n != len(vertices) + 1:
                 raise SceneError(f"{where}: vertex {n} out of sequence (expected {len(vertices) + 1})")
-            vertices.append([_number(t, where, "a coordinate") for t in words[2:5]])
+            vertices.append([_coordinate(t, where) for t in words[2:5]])
         elif key in "SO":
             if geometry == "3a":
                 corners = _shape_surface(words, where, key, model, tokens)
