@@ -143,3 +143,12 @@ def test_messages_quote_a_short_excerpt(tmp_path):
         radiosity.load_scene(obj)
     assert len(str(info.value)) < 400 and "characters)" in str(info.value)
     assert excerpt("short") == "short"
+
+
+def test_an_emission_that_would_overflow_is_refused_with_its_line(tmp_path):
+    """Ke 1e300 put NaN residuals in summary.json; from about 1e38 solution.ply held inf."""
+    (tmp_path / "a.mtl").write_text("newmtl lamp\nKd 0.5 0.5 0.5\nKe 1e300 1 1\n")
+    obj = tmp_path / "a.obj"
+    obj.write_text("mtllib a.mtl\nusemtl lamp\n" + TRIANGLE)
+    with pytest.raises(SceneError, match=r"a\.mtl:3: Ke is beyond 1e\+30"):
+        radiosity.load_scene(obj)

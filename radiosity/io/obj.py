@@ -33,6 +33,9 @@ __all__ = ["ObjData", "Material", "read_obj", "read_mtl", "MAX_COORDINATE"]
 # Largest accepted |coordinate| in file units. A million kilometres in metres: nothing real is
 # modelled beyond it, and squares of larger values start to lose the precision areas need.
 MAX_COORDINATE = 1e9
+# Emitted radiance above this would overflow float32 outputs (PLY) once divided by 1 - rho and
+# multiplied by areas; the brightest real sources are some 1e9 W/(m^2 sr).
+MAX_EMISSION = 1e30
 
 # A file whose first bytes hold this fraction of control characters (or any NUL) is binary.
 _BINARY_FRACTION = 0.1
@@ -166,6 +169,9 @@ def read_mtl(path: Path, referenced_from: str = "", notes: list[str] | None = No
             values = _floats(tokens, 3 if len(tokens) >= 3 else 1, where, keyword)
             if len(values) == 1:
                 values = values * 3
+            if keyword == "Ke" and max(abs(v) for v in values) > MAX_EMISSION:
+                raise SceneError(f"{where}: Ke is beyond {MAX_EMISSION:g} W/(m^2 sr); radiosities and the "
+                                 f"energy balance would overflow: {excerpt(' '.join(tokens))!r}")
             setattr(current, keyword.lower(), tuple(values))
             setattr(current, f"{keyword.lower()}_where", where)
     return materials
