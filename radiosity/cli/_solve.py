@@ -38,7 +38,9 @@ def format_summary(solution, load_seconds: float) -> str:
     times = {"load": load_seconds, **s["timings_s"]}
     lines.append("time (s)   " + "   ".join(f"{k} {v:.2f}" for k, v in times.items()))
     sol = s["solver"]
-    lines.append(f"solver     {sol['method']}, iterations {sol['iterations']}, residual {max(sol['residual']):.1e}")
+    fallback = sorted({f for f in sol.get("fallback", []) if f})
+    lines.append(f"solver     {sol['method']}, iterations {sol['iterations']}, residual {max(sol['residual']):.1e}"
+                 + (f"   (stopped at its cap: solved with {', '.join(fallback)})" if fallback else ""))
     e = s["energy_W"]
     em, ab, es = (np.array(e[k]) for k in ("emitted", "absorbed", "escaped"))
     lines.append("emission   " + _emission_line(s["emission"]["ke_read_as"]))
