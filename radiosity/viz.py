@@ -126,7 +126,8 @@ def parse_camera(text: str, focal_default=None) -> Camera:
         angle = float(parts[2]) if len(parts) == 3 else _VIEW_ANGLE_USER
     except ValueError:
         raise ValueError(msg) from None
-    if len(parts) > 3 or any(len(v) != 3 for v in vectors) or not np.isfinite(np.concatenate(vectors + [[angle]])).all():
+    numbers = np.concatenate([np.ravel(v) for v in vectors] + [[angle]])
+    if len(parts) > 3 or any(len(v) != 3 for v in vectors) or not np.isfinite(numbers).all():
         raise ValueError(msg)
     if not 0 < angle < 180:
         raise ValueError(f"camera view angle must be between 0 and 180 degrees, got {angle:g}")
@@ -187,11 +188,11 @@ def auto_camera(triangles: np.ndarray) -> Camera | None:
     -----
     Rays from 27 points of the scene's bounding box (a 3 x 3 x 3 grid at 25/50/75%) find the one
     that sees the most front faces. If that share is at least 60%, the scene is a room. A room
-    letting more than 5% of the rays escape (over all the points inside it) is open (the Cornell box's front): the camera looks in
-    through the opening, from outside it, level (y up), with a 40 degree lens framing the room.
-    A closed room is looked at from inside, near the middle of one wall at 60% of the height,
-    across its longest horizontal extent, with a 70 degree lens; a wall spot inside an object is
-    skipped.
+    letting more than 5% of the rays escape (over all the points inside it) is open (the Cornell
+    box's front): the camera looks in through the opening, from outside it, level (y up), with a
+    40 degree lens framing the room. A closed room is looked at from inside, near the middle of
+    one wall at 60% of the height, across its longest horizontal extent, with a 70 degree lens;
+    a wall spot inside an object is skipped.
     """
     pts = triangles.reshape(-1, 3)
     lo, hi = pts.min(axis=0), pts.max(axis=0)
