@@ -256,11 +256,16 @@ def _trailing_groups(groups: list[_GroupLine], face_group: list[int], face_mater
 def _trailing_note(path: Path, groups: list[_GroupLine], claimed: list[int], face_group: list[int],
                    face_line: list[int]) -> str:
     last = groups[claimed[-1]]
+    members: dict[int, list[int]] = {}
+    for f, owner in enumerate(face_group):  # one pass, however many groups were claimed
+        members.setdefault(owner, []).append(f)
     named = []
-    for k in claimed:
-        members = [f for f, owner in enumerate(face_group) if owner == k]
-        named.append(f"'{groups[k].name}' (line {groups[k].line}: {len(members)} face(s), "
-                     f"lines {face_line[members[0]]}-{face_line[members[-1]]})")
+    for k in claimed[:5]:
+        mine = members[k]
+        named.append(f"'{groups[k].name}' (line {groups[k].line}: {len(mine)} face(s), "
+                     f"lines {face_line[mine[0]]}-{face_line[mine[-1]]})")
+    if len(claimed) > 5:
+        named.append(f"and {len(claimed) - 5} more")
     return (f"{path}:{last.line}: '{last.keyword} {last.name}' comes right after faces and has none of its "
             f"own: this file names groups after their faces; read {len(claimed)} group line(s) as naming "
             f"the faces before them, back to the previous g, o or usemtl line: {', '.join(named)}")
