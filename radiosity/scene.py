@@ -46,6 +46,11 @@ class Scene:
         Diffuse reflectance rho per patch and RGB channel, in [0, 1).
     emission : (n, 3) float
         Emitted exitance E per patch, W/m^2.
+    emission_mode : {"radiance", "exitance"}
+        How the MTL's ``Ke`` was read (E = pi Ke, or E = Ke).
+    light_paths : dict or None
+        Where the emitters' light first lands: shares ``front``, ``back``, ``escaped`` of
+        ``rays`` rays and ``back_objects`` (see ``docs/errors.md``); None if nothing emits.
     """
 
     objects: list[str]
