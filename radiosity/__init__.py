@@ -11,7 +11,11 @@ solve               -- radiosity solution of a scene (Solution), with presets
 view_factors        -- sparse patch-to-patch view-factor matrix with occlusion
 Scene, Solution, Options, PRESETS
 RadiosityError, SceneError, MemoryBudgetError, RadiosityWarning
+__version__         -- the installed package's version (from its metadata)
 """
+
+from importlib.metadata import PackageNotFoundError as _NotInstalled
+from importlib.metadata import version as _version
 
 from ._errors import MemoryBudgetError, RadiosityError, RadiosityWarning, SceneError
 from .formfactors import point_to_polygon, point_to_polygons, polygon_to_polygon
@@ -19,6 +23,11 @@ from .options import PRESETS, Options
 from .scene import Scene, bundled_scene, load_scene
 from .solution import Solution
 from .solve import solve, view_factors
+
+try:
+    __version__ = _version("radiosity")
+except _NotInstalled:  # pragma: no cover - run from a source tree that was never installed
+    __version__ = "0+unknown"
 
 __all__ = [
     "point_to_polygon",

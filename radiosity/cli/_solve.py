@@ -11,7 +11,8 @@ import numpy as np
 from .._errors import SceneError
 from ..io.export import atomic_path, staged_outputs, write_ply, write_png, write_summary, write_vtp
 from ..solve import solve
-from ._common import add_scene_args, load, overrides
+from ..system import DIRECT_MAX
+from ._common import add_scene_args, load, overrides, unit_scale
 
 NAME = "solve"
 HELP = "solve a scene's radiosity and write a picture, meshes and summary.json"
@@ -23,10 +24,14 @@ def add_args(parser) -> None:
     parser.add_argument("-o", "--output", type=Path, default=Path("radiosity-out"), metavar="OUTDIR",
                         help="output folder (default: %(default)s)")
     parser.add_argument("--solver", default="auto",
-                        choices=("auto", "direct", "bicgstab", "gmres", "jacobi", "gauss-seidel", "progressive"))
+                        choices=("auto", "direct", "bicgstab", "gmres", "jacobi", "gauss-seidel", "progressive"),
+                        help="linear solver for (I - rho F) B = E: auto takes a direct sparse LU up to "
+                             f"{DIRECT_MAX:,} patches and bicgstab beyond; jacobi, gauss-seidel and "
+                             "progressive (shooting) are there to compare (default: %(default)s)")
     parser.add_argument("--no-picture", action="store_true", help="skip the PNG")
     parser.add_argument("--points", type=Path, default=None, metavar="FILE",
-                        help="text file of receiver points 'x y z nx ny nz' per line; writes irradiance.csv")
+                        help="text file of receiver points 'x y z nx ny nz' per line, in the scene's "
+                             "--units; writes irradiance.csv")
 
 
 def format_summary(solution, load_seconds: float) -> str:
@@ -84,6 +89,7 @@ def run(args) -> int:
     t0 = time.perf_counter()
     scene = load(args)
     points = read_points(args.points) if args.points else None
+    to_metres = unit_scale(args)  # the points are in the scene's coordinates, like the OBJ
     load_seconds = time.perf_counter() - t0
     out = args.output
     written = ["solution.vtp", "solution.ply"] + ([] if args.no_picture else ["picture.png"])
@@ -93,7 +99,7 @@ def run(args) -> int:
     with staged_outputs(out) as stage:
         solution = solve(scene, preset=args.preset, solver=args.solver, progress=sys.stderr.isatty(),
                          **overrides(args))
-        h = solution.irradiance(points[:, :3], points[:, 3:]) if points is not None else None
+        h = solution.irradiance(points[:, :3] * to_metres, points[:, 3:]) if points is not None else None
         summary = solution.summary()
         write_vtp(solution, stage / "solution.vtp")
         write_ply(solution, stage / "solution.ply")
@@ -102,7 +108,7 @@ def run(args) -> int:
         if h is not None:
             with atomic_path(stage / "irradiance.csv") as tmp:
                 np.savetxt(tmp, np.column_stack([points, h]), delimiter=",", fmt="%.9g",
-                           header="x,y,z,nx,ny,nz,H_r,H_g,H_b (W/m^2)", comments="")
+                           header=f"x,y,z ({args.units or 'm'}),nx,ny,nz,H_r,H_g,H_b (W/m^2)", comments="")
         write_summary(summary, stage / "summary.json")
     print(format_summary(solution, load_seconds))
     print(f"wrote      {out}/: {' '.join(written)}")
