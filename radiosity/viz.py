@@ -31,8 +31,9 @@ def auto_exposure(solution) -> float:
 def to_polydata(solution):
     """pyvista.PolyData of the solved patches with per-face and per-vertex radiosity.
 
-    Cell data: ``radiosity`` (n, 3) W/m^2, ``object`` (n,) index; point data: ``radiosity``
-    (area-weighted over the patches of the same object meeting at the vertex).
+    Cell data: ``radiosity`` (n, 3) W/m^2, ``object`` (n,) index into the field data
+    ``object_names``; point data: ``radiosity`` (area-weighted over the patches of the same
+    object meeting at the vertex).
     """
     import pyvista as pv
 
@@ -42,6 +43,7 @@ def to_polydata(solution):
     mesh.cell_data["radiosity"] = solution.radiosity
     mesh.cell_data["object"] = solution.scene.patch_object
     mesh.point_data["radiosity"] = vertex_b
+    mesh.field_data["object_names"] = np.array(solution.scene.objects, dtype=str)
     return mesh
 
 

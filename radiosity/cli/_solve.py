@@ -9,10 +9,13 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import SceneError
+from .._kernels import FIRST_RUN_MESSAGE, compile_timer, kernels_on_disk, warm_up
 from ..io.export import atomic_path, staged_outputs, write_ply, write_png, write_summary, write_vtp
 from ..solve import solve
 from ..system import DIRECT_MAX
+from ..viz import auto_exposure
 from ._common import add_scene_args, load, overrides, unit_scale
+from ._record import run_record
 
 NAME = "solve"
 HELP = "solve a scene's radiosity and write a picture, meshes and summary.json"
@@ -34,13 +37,14 @@ def add_args(parser) -> None:
                              "--units; writes irradiance.csv")
 
 
-def format_summary(solution, load_seconds: float) -> str:
+def format_summary(solution, load_seconds: float, compile_seconds: float = 0.0) -> str:
     s = solution.summary()
     lines = [f"scene      {s['source']}",
              f"patches    {s['patches']}   view factors {s['nonzeros']:,}   rays {s['rays'] or 0:,}"
              + ("   (form factors from cache)" if s["cache_hit"] else "")]
     times = {"load": load_seconds, **s["timings_s"]}
-    lines.append("time (s)   " + "   ".join(f"{k} {v:.2f}" for k, v in times.items()))
+    lines.append("time (s)   " + "   ".join(f"{k} {v:.2f}" for k, v in times.items())
+                 + (f"   (and compiling kernels {compile_seconds:.1f}, first run only)" if compile_seconds >= 0.5 else ""))
     sol = s["solver"]
     lines.append(f"solver     {sol['method']}, iterations {sol['iterations']}, residual {max(sol['residual']):.1e}")
     e = s["energy_W"]
@@ -85,6 +89,10 @@ def read_points(path: Path) -> np.ndarray:
     return np.asarray(rows)
 
 
+# Every file a solve may write: those of an earlier run that this run does not write are removed.
+OUTPUT_NAMES = ("solution.vtp", "solution.ply", "picture.png", "irradiance.csv", "summary.json")
+
+
 def run(args) -> int:
     t0 = time.perf_counter()
     scene = load(args)
@@ -96,20 +104,26 @@ def run(args) -> int:
     written += (["irradiance.csv"] if points is not None else []) + ["summary.json"]
     # Everything goes to a staging folder first and is moved into OUTDIR only when all of it is
     # written: a failed or interrupted run leaves an earlier run's outputs as they were.
-    with staged_outputs(out) as stage:
+    with staged_outputs(out, owned=OUTPUT_NAMES) as stage, compile_timer() as compiled:
+        if not kernels_on_disk():
+            print(FIRST_RUN_MESSAGE, file=sys.stderr, flush=True)
+            warm_up()
         solution = solve(scene, preset=args.preset, solver=args.solver, progress=sys.stderr.isatty(),
                          **overrides(args))
         h = solution.irradiance(points[:, :3] * to_metres, points[:, 3:]) if points is not None else None
         summary = solution.summary()
         write_vtp(solution, stage / "solution.vtp")
         write_ply(solution, stage / "solution.ply")
+        exposure = auto_exposure(solution)
         if not args.no_picture:
-            summary["exposure"] = write_png(solution, stage / "picture.png")
+            write_png(solution, stage / "picture.png", exposure=exposure)
         if h is not None:
             with atomic_path(stage / "irradiance.csv") as tmp:
                 np.savetxt(tmp, np.column_stack([points, h]), delimiter=",", fmt="%.9g",
                            header=f"x,y,z ({args.units or 'm'}),nx,ny,nz,H_r,H_g,H_b (W/m^2)", comments="")
+        summary.update(run_record(args, solution, exposure=exposure, load_seconds=load_seconds,
+                                  compile_seconds=compiled.seconds, outputs=written))
         write_summary(summary, stage / "summary.json")
-    print(format_summary(solution, load_seconds))
+    print(format_summary(solution, load_seconds, compiled.seconds))
     print(f"wrote      {out}/: {' '.join(written)}")
     return 0

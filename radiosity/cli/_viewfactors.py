@@ -27,7 +27,8 @@ def add_args(parser) -> None:
 def run(args) -> int:
     scene = load(args)
     F = view_factors(scene, preset=args.preset, enforce=args.enforce, **overrides(args))
-    write_view_factors(F, scene.patch_area, scene.patch_object, scene.objects, args.output)
+    write_view_factors(F, scene.patch_area, scene.patch_object, scene.objects, args.output,
+                       hidden=scene.patch_hidden)
     d = diagnose(F, scene.patch_area)
     print(f"{scene.n_patches} patches, {F.nnz:,} non-zero view factors")
     print(f"row sums {d.row_sums.min():.8f} .. {d.row_sums.max():.8f}; "

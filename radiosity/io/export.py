@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["atomic_path", "staged_outputs", "write_summary", "write_ply", "write_vtp", "write_png", "write_view_factors"]
+__all__ = ["atomic_path", "staged_outputs", "triangles", "write_summary", "write_ply", "write_vtp", "write_png", "write_view_factors"]
 
 
 @contextlib.contextmanager
@@ -42,14 +42,17 @@ STAGING_PREFIX = ".radiosity-partial-"
 
 
 @contextlib.contextmanager
-def staged_outputs(folder: str | Path):
+def staged_outputs(folder: str | Path, owned: tuple[str, ...] = ()):
     """Yield a hidden staging folder inside ``folder``; move its files into ``folder`` on success.
 
     Every output of a run is written into the staging folder first. Only when the whole block
     succeeds are the files renamed into ``folder`` (each rename is atomic), so a run that fails
     or is interrupted leaves the outputs of an earlier run untouched, not a mix of old and new.
     The folder is created (and checked for writing) on entry, before any long computation; if
-    it was created here and the run fails, it is removed again.
+    it was created here and the run fails, it is removed again. Files named in ``owned`` (what
+    this kind of run may write) that this run did not write are removed on success, so an
+    earlier run's ``picture.png`` or ``irradiance.csv`` does not pass for this run's; other
+    files in ``folder`` are left alone.
 
     Raises
     ------
@@ -73,9 +76,14 @@ def staged_outputs(folder: str | Path):
     ok = False
     try:
         yield stage
+        written = set()
         for item in sorted(stage.iterdir()):
             if not item.name.startswith("."):
                 os.replace(item, folder / item.name)
+                written.add(item.name)
+        for name in set(owned) - written:
+            with contextlib.suppress(FileNotFoundError, IsADirectoryError):
+                (folder / name).unlink()
         ok = True
     finally:
         shutil.rmtree(stage, ignore_errors=True)
@@ -89,35 +97,55 @@ def write_summary(summary: dict, path: str | Path) -> None:
         tmp.write_text(json.dumps(summary, indent=2) + "\n")
 
 
+def triangles(solution) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The solved mesh as triangles: vertices (v, 3), triangles (t, 3) and each one's patch (t,).
+
+    Each patch outline of ``Solution.vertex_mesh`` (which carries its neighbours' T-junction
+    vertices) is fanned from its first corner; triangles of collinear corners (zero area) are
+    dropped, so every triangle is proper and every patch keeps at least one.
+    """
+    vertices, faces, _ = solution.vertex_mesh
+    counts = np.array([len(f) - 2 for f in faces])
+    tris = np.concatenate([np.column_stack([np.full(len(f) - 2, f[0]), f[1:-1], f[2:]]) for f in faces])
+    patch = np.repeat(np.arange(len(faces)), counts)
+    a, b, c = (vertices[tris[:, k]] for k in range(3))
+    twice_area = np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    keep = twice_area > 1e-12 * max(solution.scene.scale, 1e-300) ** 2
+    return vertices, tris[keep], patch[keep]
+
+
 def write_ply(solution, path: str | Path) -> None:
-    """Binary PLY: vertices with radiosity (float) and sRGB colour; faces with radiosity."""
+    """ASCII PLY of triangles, readable by trimesh, meshio, pyvista/VTK and MeshLab.
+
+    Vertex properties: ``x y z``, float ``radiosity_r/g/b`` (W/m^2, area-weighted over the
+    patches of one object meeting there) and 8-bit sRGB ``red green blue`` (the picture's tone
+    map). Face properties: float ``radiosity_r/g/b`` (the patch's value), ``patch`` (row of
+    ``Solution.radiosity``) and ``object`` (index into the ``comment object`` names).
+    Faces are triangles because several readers refuse mixed polygon sizes.
+    """
     from ..viz import auto_exposure, tone_map
 
-    vertices, faces, vertex_b = solution.vertex_mesh
+    vertices, tris, patch = triangles(solution)
+    vertex_b = solution.vertex_mesh[2]
     colour = tone_map(vertex_b / np.pi, auto_exposure(solution))
-    vdtype = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("radiosity_r", "<f4"), ("radiosity_g", "<f4"),
-                       ("radiosity_b", "<f4"), ("red", "u1"), ("green", "u1"), ("blue", "u1")])
-    vrec = np.empty(len(vertices), dtype=vdtype)
-    for name, col in zip(("x", "y", "z"), vertices.T):
-        vrec[name] = col
-    for k, c in enumerate("rgb"):
-        vrec[f"radiosity_{c}"] = vertex_b[:, k]
-    for name, col in zip(("red", "green", "blue"), colour.T):
-        vrec[name] = col
-    header = ["ply", "format binary_little_endian 1.0", "comment radiosity W/m^2 per vertex and per face",
-              f"element vertex {len(vertices)}"]
+    header = ["ply", "format ascii 1.0", "comment radiosity W/m^2 per vertex and per face",
+              "comment red green blue: sRGB of radiance B/pi times the picture's exposure"]
+    header += [f"comment object {k} {name}" for k, name in enumerate(solution.scene.objects)]
+    header += [f"element vertex {len(vertices)}"]
     header += [f"property float {n}" for n in ("x", "y", "z", "radiosity_r", "radiosity_g", "radiosity_b")]
     header += ["property uchar red", "property uchar green", "property uchar blue",
-               f"element face {len(faces)}", "property list uchar int vertex_indices",
+               f"element face {len(tris)}", "property list uchar int vertex_indices",
                "property float radiosity_r", "property float radiosity_g", "property float radiosity_b",
-               "end_header"]
-    chunks = []
-    for f, b in zip(faces, solution.radiosity.astype("<f4")):
-        chunks.append(np.uint8(len(f)).tobytes() + np.asarray(f, "<i4").tobytes() + b.tobytes())
-    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-        fh.write(("\n".join(header) + "\n").encode())
-        fh.write(vrec.tobytes())
-        fh.write(b"".join(chunks))
+               "property int patch", "property int object", "end_header"]
+    # ASCII: meshio's binary reader takes face properties column by column, which misreads any
+    # binary PLY with more than the vertex list per face; every reader agrees on ASCII.
+    vertex_rows = np.column_stack([vertices, vertex_b, colour])
+    face_rows = np.column_stack([np.full(len(tris), 3), tris, solution.radiosity[patch], patch,
+                                 solution.scene.patch_object[patch]])
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="ascii") as fh:
+        fh.write("\n".join(header) + "\n")
+        np.savetxt(fh, vertex_rows, fmt=["%.9g"] * 6 + ["%d"] * 3)
+        np.savetxt(fh, face_rows, fmt=["%d"] * 4 + ["%.9g"] * 3 + ["%d"] * 2)
 
 
 def write_vtp(solution, path: str | Path) -> None:
@@ -135,9 +163,11 @@ def write_png(solution, path: str | Path, **kwargs) -> float:
 
 
 def write_view_factors(F: sp.csr_matrix, area: np.ndarray, patch_object: np.ndarray, objects: list[str],
-                       path: str | Path) -> None:
-    """``F.npz`` readable by ``scipy.sparse.load_npz``, plus ``area``, ``patch_object``, ``objects``."""
+                       path: str | Path, hidden: np.ndarray | None = None) -> None:
+    """``F.npz`` readable by ``scipy.sparse.load_npz``, plus ``area``, ``patch_object``, ``objects``
+    and ``hidden`` (patches under a contact, whose rows and columns are zero)."""
     F = F.tocsr()
+    hidden = np.zeros(F.shape[0], dtype=bool) if hidden is None else np.asarray(hidden, dtype=bool)
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         np.savez_compressed(fh, format=np.array("csr"), shape=np.array(F.shape), data=F.data, indices=F.indices,
-                            indptr=F.indptr, area=area, patch_object=patch_object, objects=np.array(objects))
+                            indptr=F.indptr, area=area, patch_object=patch_object, objects=np.array(objects), hidden=hidden)
