@@ -1,10 +1,17 @@
-"""``radiosity view``: open the interactive pyvista viewer on a solved result."""
+"""``radiosity view``: open the interactive pyvista viewer on a solved result.
+
+Without a display (no ``DISPLAY`` or ``WAYLAND_DISPLAY`` on Linux) no window can open: the
+command refuses with one line and exit status 2 instead of VTK's log lines, and names the
+options that work off-screen (``--screenshot``).
+"""
 
 from __future__ import annotations
 
+import os
+import sys
 from pathlib import Path
 
-from .._errors import SceneError
+from .._errors import RadiosityError, SceneError
 
 NAME = "view"
 HELP = "open the interactive viewer on a solved result (OUTDIR or its solution.vtp)"
@@ -12,7 +19,15 @@ HELP = "open the interactive viewer on a solved result (OUTDIR or its solution.v
 
 def add_args(parser) -> None:
     parser.add_argument("result", type=Path, help="output folder of 'radiosity solve' or a .vtp file")
-    parser.add_argument("--screenshot", type=Path, default=None, help="save a PNG instead of opening a window")
+    parser.add_argument("--screenshot", type=Path, default=None, metavar="OUT.png",
+                        help="render off-screen and save a PNG instead of opening a window (works without a display)")
+
+
+def has_display() -> bool:
+    """Whether a window can open: on Linux and the BSDs an X11 or Wayland display must be set."""
+    if sys.platform.startswith(("linux", "freebsd", "openbsd", "netbsd")):
+        return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    return True
 
 
 def read_result(path: Path):
@@ -45,19 +60,40 @@ def read_result(path: Path):
     return mesh
 
 
+def _summary_beside(path: Path) -> dict:
+    """The ``summary.json`` written with a result (for its exposure and scene), or {}."""
+    import json
+
+    try:
+        record = json.loads((path.parent / "summary.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return record if isinstance(record, dict) else {}
+
+
 def run(args) -> int:
     import numpy as np
     import pyvista as pv
 
-    from ..viz import tone_map
+    from ..viz import _quiet_vtk, scene_camera, tone_map
 
     path = args.result / "solution.vtp" if args.result.is_dir() else args.result
     mesh = read_result(path)
+    if args.screenshot is None and not has_display():
+        raise RadiosityError("no display to open a window on (DISPLAY is not set); use --screenshot OUT.png "
+                             "to render off-screen")
+    _quiet_vtk()
+    record = _summary_beside(path)
     radiance = np.asarray(mesh.point_data["radiosity"]) / np.pi
-    level = np.percentile(radiance.max(axis=1), 90) or 1.0
-    mesh.point_data["rgb"] = tone_map(radiance, 0.85 / level)
+    exposure = record.get("exposure") or 0.85 / (np.percentile(radiance.max(axis=1), 90) or 1.0)
+    mesh.point_data["rgb"] = tone_map(radiance, exposure)  # the picture's tone map, when known
     plotter = pv.Plotter(off_screen=args.screenshot is not None)
+    plotter.set_background("black")
     plotter.add_mesh(mesh, scalars="rgb", rgb=True, lighting=False)
+    camera = scene_camera(record["source"]) if record.get("source") else None
+    if camera is not None:  # the scene's own camera, as in picture.png
+        plotter.camera.position, plotter.camera.focal_point, plotter.camera.up = camera[:3]
+        plotter.camera.view_angle = camera[3]
     if args.screenshot is not None:
         plotter.screenshot(str(args.screenshot))
         plotter.close()
