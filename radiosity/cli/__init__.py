@@ -1,4 +1,4 @@
-"""The ``radiosity`` command: solve, view, viewfactors. ``main(argv)`` returns the exit code.
+"""The ``radiosity`` command: solve, view, viewfactors, cache. ``main(argv)`` returns the exit code.
 
 Bad input (a ``RadiosityError``, ``ValueError`` or ``OSError``, a request too big for the
 machine, a bad command line) ends with exactly one line on stderr, ``radiosity: error: ...``,
@@ -18,7 +18,7 @@ import sys
 import warnings
 
 from .._errors import MemoryBudgetError, RadiosityError, RadiosityWarning
-from . import _solve, _view, _viewfactors
+from . import _cache, _solve, _view, _viewfactors
 
 __all__ = ["main"]
 
@@ -55,7 +55,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="print the version and exit")
     parser.add_argument("--debug", action="store_true", help="show tracebacks for bad input and internal errors")
     sub = parser.add_subparsers(dest="command", required=True)
-    for module in (_solve, _view, _viewfactors):
+    for module in (_solve, _view, _viewfactors, _cache):
         p = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP)
         p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                        help="show tracebacks for bad input and internal errors")
