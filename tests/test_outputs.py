@@ -144,7 +144,7 @@ def test_summary_records_the_run(solved):
     assert s["exposure"] > 0 and "sRGB" in s["tone_map"] and "98th percentile" in s["tone_map"]
     assert set(s["timings_s"]) >= {"patches", "form factors", "visibility", "solve"}
     assert s["compile_s"] >= 0 and "compile" in s["compile_note"]
-    assert s["outputs"] == ["solution.vtp", "solution.ply", "irradiance.csv", "summary.json"]
+    assert s["outputs"] == ["solution.vtp", "solution.ply", "solution.glb", "irradiance.csv", "summary.json"]
 
 
 def test_vtp_has_the_object_name_table(solved):
@@ -166,8 +166,8 @@ def test_stale_outputs_of_an_earlier_run_are_removed(solved, tmp_path, capsys):
     (out / "my notes.txt").write_text("the user's own file")
     assert main(["solve", str(ROOM), "--preset", "draft", "--no-picture", "-o", str(out)]) == 0
     capsys.readouterr()
-    assert sorted(p.name for p in out.iterdir()) == ["my notes.txt", "solution.ply", "solution.vtp",
-                                                     "summary.json"]
+    assert sorted(p.name for p in out.iterdir()) == ["my notes.txt", "solution.glb", "solution.ply",
+                                                     "solution.vtp", "summary.json"]
 
 
 def test_view_factor_file_has_hidden_flags(tmp_path, capsys):

@@ -10,7 +10,8 @@ import numpy as np
 
 from .._errors import SceneError
 from .._kernels import FIRST_RUN_MESSAGE, compile_timer, kernels_on_disk, warm_up
-from ..io.export import atomic_path, staged_outputs, write_ply, write_png, write_summary, write_vtp
+from ..io.export import atomic_path, staged_outputs, write_glb, write_ply, write_png, write_summary, write_vtp
+from ..io.html import write_html
 from ..solve import solve
 from ..system import DIRECT_MAX
 from ..viz import auto_exposure
@@ -32,6 +33,9 @@ def add_args(parser) -> None:
                              f"{DIRECT_MAX:,} patches and bicgstab beyond; jacobi, gauss-seidel and "
                              "progressive (shooting) are there to compare (default: %(default)s)")
     parser.add_argument("--no-picture", action="store_true", help="skip the PNG")
+    parser.add_argument("--html", action="store_true",
+                        help="also write solution.html, a self-contained interactive page (orbit, values on "
+                             "hover, colour bar) that opens offline in any browser")
     parser.add_argument("--points", type=Path, default=None, metavar="FILE",
                         help="text file of receiver points 'x y z nx ny nz' per line, in the scene's "
                              "--units; writes irradiance.csv")
@@ -90,7 +94,8 @@ def read_points(path: Path) -> np.ndarray:
 
 
 # Every file a solve may write: those of an earlier run that this run does not write are removed.
-OUTPUT_NAMES = ("solution.vtp", "solution.ply", "picture.png", "irradiance.csv", "summary.json")
+OUTPUT_NAMES = ("solution.vtp", "solution.ply", "solution.glb", "solution.html", "picture.png", "irradiance.csv",
+                "summary.json")
 
 
 def run(args) -> int:
@@ -100,7 +105,8 @@ def run(args) -> int:
     to_metres = unit_scale(args)  # the points are in the scene's coordinates, like the OBJ
     load_seconds = time.perf_counter() - t0
     out = args.output
-    written = ["solution.vtp", "solution.ply"] + ([] if args.no_picture else ["picture.png"])
+    written = ["solution.vtp", "solution.ply", "solution.glb"] + (["solution.html"] if args.html else [])
+    written += [] if args.no_picture else ["picture.png"]
     written += (["irradiance.csv"] if points is not None else []) + ["summary.json"]
     # Everything goes to a staging folder first and is moved into OUTDIR only when all of it is
     # written: a failed or interrupted run leaves an earlier run's outputs as they were.
@@ -115,6 +121,9 @@ def run(args) -> int:
         write_vtp(solution, stage / "solution.vtp")
         write_ply(solution, stage / "solution.ply")
         exposure = auto_exposure(solution)
+        write_glb(solution, stage / "solution.glb", exposure=exposure)
+        if args.html:
+            write_html(solution, stage / "solution.html", exposure=exposure)
         if not args.no_picture:
             write_png(solution, stage / "picture.png", exposure=exposure)
         if h is not None:

@@ -21,6 +21,9 @@ def add_args(parser) -> None:
     parser.add_argument("result", type=Path, help="output folder of 'radiosity solve' or a .vtp file")
     parser.add_argument("--screenshot", type=Path, default=None, metavar="OUT.png",
                         help="render off-screen and save a PNG instead of opening a window (works without a display)")
+    parser.add_argument("--html", type=Path, default=None, metavar="OUT.html",
+                        help="write a self-contained interactive page (opens offline in any browser) instead of "
+                             "opening a window")
 
 
 def has_display() -> bool:
@@ -71,6 +74,19 @@ def _summary_beside(path: Path) -> dict:
     return record if isinstance(record, dict) else {}
 
 
+def _write_page(mesh, path: Path, target: Path) -> int:
+    import numpy as np
+
+    from ..io.html import page_data_from_result, write_page
+
+    record = _summary_beside(path)
+    radiance = np.asarray(mesh.point_data["radiosity"]) / np.pi
+    exposure = record.get("exposure") or 0.85 / (np.percentile(radiance.max(axis=1), 90) or 1.0)
+    write_page(page_data_from_result(mesh, record, exposure=float(exposure)), target)
+    print(f"wrote {target}")
+    return 0
+
+
 def run(args) -> int:
     import numpy as np
     import pyvista as pv
@@ -79,9 +95,11 @@ def run(args) -> int:
 
     path = args.result / "solution.vtp" if args.result.is_dir() else args.result
     mesh = read_result(path)
+    if args.html is not None:
+        return _write_page(mesh, path, args.html)
     if args.screenshot is None and not has_display():
         raise RadiosityError("no display to open a window on (DISPLAY is not set); use --screenshot OUT.png "
-                             "to render off-screen")
+                             "to render off-screen, or --html OUT.html for a page")
     _quiet_vtk()
     record = _summary_beside(path)
     radiance = np.asarray(mesh.point_data["radiosity"]) / np.pi

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["atomic_path", "staged_outputs", "triangles", "write_summary", "write_ply", "write_vtp", "write_png", "write_view_factors"]
+__all__ = ["atomic_path", "staged_outputs", "triangles", "write_glb", "write_summary", "write_ply", "write_vtp", "write_png", "write_view_factors"]
 
 
 @contextlib.contextmanager
@@ -171,3 +171,54 @@ def write_view_factors(F: sp.csr_matrix, area: np.ndarray, patch_object: np.ndar
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         np.savez_compressed(fh, format=np.array("csr"), shape=np.array(F.shape), data=F.data, indices=F.indices,
                             indptr=F.indptr, area=area, patch_object=patch_object, objects=np.array(objects), hidden=hidden)
+
+
+def linear_colours(radiance: np.ndarray, exposure: float) -> np.ndarray:
+    """Radiance (..., 3) times exposure, clipped to [0, 1]: linear display values (glTF's COLOR_0)."""
+    return np.clip(np.asarray(radiance) * exposure, 0.0, 1.0)
+
+
+def _unlit(tree: dict) -> None:
+    """glTF post-processing: every primitive gets one unlit white material (KHR_materials_unlit),
+    so viewers show the baked radiosity as it is instead of lighting it again."""
+    tree["materials"] = [{"name": "radiosity (baked, unlit)",
+                          "pbrMetallicRoughness": {"baseColorFactor": [1.0, 1.0, 1.0, 1.0],
+                                                   "metallicFactor": 0.0, "roughnessFactor": 1.0},
+                          "extensions": {"KHR_materials_unlit": {}}}]
+    for mesh in tree.get("meshes", []):
+        for primitive in mesh["primitives"]:
+            primitive["material"] = 0
+    used = set(tree.get("extensionsUsed", [])) | {"KHR_materials_unlit"}
+    tree["extensionsUsed"] = sorted(used)
+
+
+def write_glb(solution, path: str | Path, *, exposure: float | None = None) -> None:
+    """glTF 2.0 binary (.glb): one node per object, radiosity baked into vertex colours.
+
+    ``COLOR_0`` holds the radiance B/pi times ``exposure`` (the picture's, by default), clipped
+    to [0, 1], as linear values (glTF's convention: viewers encode to sRGB on display). The
+    material is unlit (``KHR_materials_unlit``). Each vertex also carries the float radiosity
+    (W/m^2) as the application attribute ``_RADIOSITY``. Written with trimesh's exporter.
+    """
+    import trimesh
+
+    from ..viz import auto_exposure
+
+    exposure = auto_exposure(solution) if exposure is None else exposure
+    vertices, tris, patch = triangles(solution)
+    vertex_b = solution.vertex_mesh[2]
+    colour = np.round(255 * linear_colours(vertex_b / np.pi, exposure)).astype(np.uint8)
+    rgba = np.column_stack([colour, np.full(len(colour), 255, np.uint8)])
+    scene = trimesh.Scene()
+    tri_object = solution.scene.patch_object[patch]
+    for index, name in enumerate(solution.scene.objects):
+        own = tris[tri_object == index]
+        if not len(own):
+            continue
+        used, local = np.unique(own, return_inverse=True)
+        mesh = trimesh.Trimesh(vertices[used], local.reshape(-1, 3), vertex_colors=rgba[used], process=False)
+        mesh.vertex_attributes["_RADIOSITY"] = vertex_b[used].astype(np.float32)
+        scene.add_geometry(mesh, geom_name=name, node_name=name)
+    data = trimesh.exchange.gltf.export_glb(scene, include_normals=False, tree_postprocessor=_unlit)
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
