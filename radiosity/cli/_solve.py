@@ -14,7 +14,7 @@ from ..io.export import atomic_path, staged_outputs, write_glb, write_ply, write
 from ..io.html import write_html
 from ..solve import solve
 from ..system import DIRECT_MAX
-from ..viz import auto_exposure
+from ..viz import auto_exposure, white_balanced
 from ._common import add_scene_args, load, overrides, unit_scale
 from ._record import run_record
 
@@ -33,6 +33,10 @@ def add_args(parser) -> None:
                              f"{DIRECT_MAX:,} patches and bicgstab beyond; jacobi, gauss-seidel and "
                              "progressive (shooting) are there to compare (default: %(default)s)")
     parser.add_argument("--no-picture", action="store_true", help="skip the PNG")
+    parser.add_argument("--white-balance", choices=("none", "light"), default="none",
+                        help="picture.png only: 'none' shows the light's own colour (the bundled box's measured "
+                             "light is yellowish, Ke 17 12 4), 'light' scales the channels so the light looks "
+                             "white, as a camera would (default: %(default)s; the files keep physical values)")
     parser.add_argument("--html", action="store_true",
                         help="also write solution.html, a self-contained interactive page (orbit, values on "
                              "hover, colour bar) that opens offline in any browser")
@@ -93,6 +97,18 @@ def read_points(path: Path) -> np.ndarray:
     return np.asarray(rows)
 
 
+def _write_picture(solution, path: Path, exposure: float, white_balance: str) -> dict | None:
+    """picture.png, white-balanced to the light if asked; returns what the balance did, or None."""
+    if white_balance == "none":
+        write_png(solution, path, exposure=exposure)
+        return None
+    shown, gains = white_balanced(solution)
+    picture_exposure = auto_exposure(shown)
+    write_png(shown, path, exposure=picture_exposure)
+    return {"mode": white_balance, "gains_rgb": [float(g) for g in gains], "picture_exposure": picture_exposure,
+            "applies_to": "picture.png only"}
+
+
 # Every file a solve may write: those of an earlier run that this run does not write are removed.
 OUTPUT_NAMES = ("solution.vtp", "solution.ply", "solution.glb", "solution.html", "picture.png", "irradiance.csv",
                 "summary.json")
@@ -124,14 +140,17 @@ def run(args) -> int:
         write_glb(solution, stage / "solution.glb", exposure=exposure)
         if args.html:
             write_html(solution, stage / "solution.html", exposure=exposure)
+        balance = None
         if not args.no_picture:
-            write_png(solution, stage / "picture.png", exposure=exposure)
+            balance = _write_picture(solution, stage / "picture.png", exposure, args.white_balance)
         if h is not None:
             with atomic_path(stage / "irradiance.csv") as tmp:
                 np.savetxt(tmp, np.column_stack([points, h]), delimiter=",", fmt="%.9g",
                            header=f"x,y,z ({args.units or 'm'}),nx,ny,nz,H_r,H_g,H_b (W/m^2)", comments="")
         summary.update(run_record(args, solution, exposure=exposure, load_seconds=load_seconds,
                                   compile_seconds=compiled.seconds, outputs=written))
+        if balance is not None:
+            summary["white_balance"] = balance
         write_summary(summary, stage / "summary.json")
     print(format_summary(solution, load_seconds, compiled.seconds))
     print(f"wrote      {out}/: {' '.join(written)}")
