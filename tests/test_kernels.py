@@ -55,6 +55,7 @@ def test_first_run_is_announced_and_compile_time_kept_apart(tmp_path, capsys, mo
     from radiosity.cli import _solve
 
     monkeypatch.setattr(_solve, "kernels_on_disk", lambda: False)
+    monkeypatch.setattr(_solve, "_interactive", lambda: True)
 
     def compiling_warm_up():
         import numba
@@ -75,5 +76,17 @@ def test_later_runs_say_nothing(tmp_path, capsys, monkeypatch):
     from radiosity.cli import _solve
 
     monkeypatch.setattr(_solve, "kernels_on_disk", lambda: True)
+    monkeypatch.setattr(_solve, "_interactive", lambda: True)
     assert main(["solve", str(ROOM), "--preset", "draft", "--no-picture", "-o", str(tmp_path / "o")]) == 0
     assert "compiling" not in capsys.readouterr().err
+
+
+def test_logs_get_no_announcement_but_the_warm_up_still_runs(tmp_path, capsys, monkeypatch):
+    """Not a terminal (CI, scripts): stderr stays for errors; the compile is still kept apart."""
+    from radiosity.cli import _solve
+
+    calls = []
+    monkeypatch.setattr(_solve, "kernels_on_disk", lambda: False)
+    monkeypatch.setattr(_solve, "warm_up", lambda: calls.append(1))
+    assert main(["solve", str(ROOM), "--preset", "draft", "--no-picture", "-o", str(tmp_path / "o")]) == 0
+    assert capsys.readouterr().err == "" and calls == [1]

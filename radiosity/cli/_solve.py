@@ -97,6 +97,10 @@ def read_points(path: Path) -> np.ndarray:
     return np.asarray(rows)
 
 
+def _interactive() -> bool:
+    return sys.stderr.isatty()
+
+
 def _write_picture(solution, path: Path, exposure: float, white_balance: str) -> dict | None:
     """picture.png, white-balanced to the light if asked; returns what the balance did, or None."""
     if white_balance == "none":
@@ -128,7 +132,8 @@ def run(args) -> int:
     # written: a failed or interrupted run leaves an earlier run's outputs as they were.
     with staged_outputs(out, owned=OUTPUT_NAMES) as stage, compile_timer() as compiled:
         if not kernels_on_disk():
-            print(FIRST_RUN_MESSAGE, file=sys.stderr, flush=True)
+            if _interactive():  # like the progress bar: for a person at a terminal, not for logs
+                print(FIRST_RUN_MESSAGE, file=sys.stderr, flush=True)
             warm_up()
         solution = solve(scene, preset=args.preset, solver=args.solver, progress=sys.stderr.isatty(),
                          **overrides(args))
