@@ -9,7 +9,9 @@ load_scene          -- OBJ + MTL scene cut into patches (Scene)
 bundled_scene       -- path of a scene shipped with the package ("cornell_box", ...)
 solve               -- radiosity solution of a scene (Solution), with presets
 view_factors        -- sparse patch-to-patch view-factor matrix with occlusion
-Scene, Solution, Options, PRESETS
+compute_view_factors -- the same with the patches it belongs to, sky factors, sums (ViewFactors)
+exchange            -- grey-body radiative exchange (net radiation method): Exchange
+Scene, Solution, Exchange, Options, PRESETS, ViewFactors
 RadiosityError, SceneError, MemoryBudgetError, RadiosityWarning
 __version__         -- the installed package's version (from its metadata)
 """
@@ -17,12 +19,17 @@ __version__         -- the installed package's version (from its metadata)
 from importlib.metadata import PackageNotFoundError as _NotInstalled
 from importlib.metadata import version as _version
 
-from ._errors import MemoryBudgetError, RadiosityError, RadiosityWarning, SceneError
-from .formfactors import point_to_polygon, point_to_polygons, polygon_to_polygon
-from .options import PRESETS, Options
-from .scene import Scene, bundled_scene, load_scene
-from .solution import Solution
-from .solve import solve, view_factors
+from ._startup import guard_imports
+
+with guard_imports():  # Ctrl-C during these seconds of imports: one line and exit 130
+    from ._errors import MemoryBudgetError, RadiosityError, RadiosityWarning, SceneError
+    from .exchange import Exchange, exchange
+    from .factors import ViewFactors
+    from .formfactors import point_to_polygon, point_to_polygons, polygon_to_polygon
+    from .options import PRESETS, Options
+    from .scene import Scene, bundled_scene, load_scene
+    from .solution import Solution
+    from .solve import compute_view_factors, solve, view_factors
 
 try:
     __version__ = _version("radiosity")
@@ -37,6 +44,10 @@ __all__ = [
     "bundled_scene",
     "solve",
     "view_factors",
+    "compute_view_factors",
+    "ViewFactors",
+    "exchange",
+    "Exchange",
     "Scene",
     "Solution",
     "Options",

@@ -18,9 +18,18 @@ import warnings
 import numpy as np
 import scipy.sparse as sp
 
-from ._errors import RadiosityWarning
+from ._errors import RadiosityError, RadiosityWarning
 
-__all__ = ["Diagnostics", "diagnose", "enforce_reciprocity"]
+__all__ = ["Diagnostics", "diagnose", "enforce_reciprocity", "check_closed", "NotClosedError", "CLOSURE_SLACK"]
+
+# Closure is refused where a row misses 1 by more than this many times the fill's requested
+# tolerance (formfactor_rtol + visibility_rtol): a row sums about n_j entries, each within its
+# tolerance, and the errors of a closed room's rows stay well below 10 x that sum in practice.
+CLOSURE_SLACK = 10.0
+
+
+class NotClosedError(RadiosityError, ValueError):
+    """Closure was asked for, but the rows show the scene is not a closed enclosure."""
 
 
 @dataclass(frozen=True)
@@ -107,3 +116,51 @@ def enforce_reciprocity(F: sp.spmatrix, area: np.ndarray, *, closure: bool = Fal
                           "scalings): the scene is probably not a closed enclosure", RadiosityWarning, stacklevel=2)
         G = (sp.diags(d) @ G @ sp.diags(d)).tocsr()
     return (sp.diags(1.0 / area) @ G).tocsr()
+
+
+def check_closed(F: sp.spmatrix, active: np.ndarray, rtol: float, *, names=None, patch_object=None) -> float:
+    """Raise unless every active row of F sums to 1 within ``CLOSURE_SLACK * rtol``.
+
+    Parameters
+    ----------
+    F : (n, n) sparse
+    active : (n,) bool
+        Rows to check (obstructions and hidden patches have none).
+    rtol : float
+        The fill's tolerance (``formfactor_rtol + visibility_rtol``).
+
+    Returns
+    -------
+    float
+        The worst ``|1 - sum_j F_ij|``.
+
+    Raises
+    ------
+    NotClosedError
+        Rows fall short of (or exceed) 1 by more than the tolerance; the message gives the
+        worst row, its deficit and the tolerance.
+
+    Examples
+    --------
+    >>> import numpy as np, scipy.sparse as sp
+    >>> check_closed(sp.csr_matrix(np.array([[0, 1.0], [1.0, 0]])), np.ones(2, bool), 1e-6)
+    0.0
+    """
+    rows = np.asarray(sp.csr_matrix(F).sum(axis=1)).ravel()
+    off = np.where(active, 1.0 - rows, 0.0)
+    if not len(off):
+        return 0.0
+    worst = int(np.argmax(np.abs(off)))
+    tolerance = CLOSURE_SLACK * rtol
+    if abs(off[worst]) <= tolerance:
+        return float(abs(off[worst]))
+    what = f"patch {worst}"
+    if names is not None and patch_object is not None:
+        what += f" (object {names[patch_object[worst]]!r})"
+    kind = "deficit" if off[worst] > 0 else "surplus"
+    short, over = int((off > tolerance).sum()), int((off < -tolerance).sum())
+    msg = (f"closure refused: rows miss 1 by more than the fill's error ({tolerance:.1g}): {what} sums to "
+           f"{rows[worst]:.6g} (worst row {kind} {abs(off[worst]):.3g}); {short} row(s) fall short, {over} exceed 1, "
+           "so this is not a closed enclosure (or the fill lost light there); "
+           "force=True (--force) scales the rows anyway")
+    raise NotClosedError(msg)

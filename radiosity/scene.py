@@ -61,6 +61,8 @@ class Scene:
     # Patches covered by another object (floor under a block, ceiling behind a light; see
     # imprint.py): they can neither receive nor send light. (n,) bool, all False by default.
     patch_hidden: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    # The model declares a closed enclosure (View3D ``encl=1``): ``enforce="auto"`` closes it.
+    enclosure: bool = False
 
     def __post_init__(self):
         if len(self.patch_obstruction) != len(self.patch_quads):
@@ -329,26 +331,43 @@ def _patch_materials(data, patches: Patches, emission: str, allow_clamp: bool, n
 
 
 def load_vs3(path, *, max_patch_size: float | None = None) -> Scene:
-    """A View3D ``.vs3`` model as a Scene: one object per surface, obstructions flagged.
+    """A View3D ``.vs3`` model as a Scene, meant as View3D means it.
 
-    Reflectance is ``1 - emissivity`` (grey body), nothing emits; obstructions block light
-    but are left out of the view-factor matrix (their rows and columns are zero).
+    - Every subsurface (``base`` column) is cut out of its base: the base keeps only the rest
+      (its area shrinks by its subsurfaces', as View3D's post-processing does).
+    - Surfaces joined by ``cmb`` are one object, named after the surface they join: the
+      object sums of F (``ViewFactors.grouped("object")``) are View3D's output surfaces.
+    - ``encl=1`` is kept in ``Scene.enclosure`` (``enforce="auto"`` then means closure);
+      ``emit=1`` (Hottel's script-F) is refused with a note: F stays the black view factors.
+
+    ``patch_face`` is the model's surface (0-based: surface ``n`` is ``n - 1``) each patch
+    came from. Reflectance is ``1 - emissivity`` (grey body), nothing emits; obstructions block
+    light but are left out of the view-factor matrix (their rows and columns are zero).
     """
-    from .io.view3d import read_vs3
+    from .io.view3d import read_vs3, separate_and_combine
 
-    data = read_vs3(path)
-    patches, report = subdivide_faces(data["vertices"], [np.asarray(s) for s in data["surfaces"]], max_patch_size)
+    model = read_vs3(path)
+    cut = separate_and_combine(model)
+    patches, report = subdivide_faces(cut.vertices, cut.faces, max_patch_size)
     if report.degenerate:
-        bad = report.degenerate[0]
-        raise SceneError(f"{path}: surface {bad + 1} ({data['names'][bad]}) has zero area")
-    parent = patches.patch_face
-    rho = np.repeat((1.0 - data["emissivity"][parent])[:, None], 3, axis=1)
-    return Scene(objects=list(data["names"]), patch_quads=patches.quads, patch_object=parent,
-                 patch_face=parent, reflectance=np.clip(rho, 0.0, 0.999), emission=np.zeros((len(parent), 3)),
-                 max_patch_size=max_patch_size, source=str(path),
-                 notes=tuple(f"{path}: surface {f + 1} is not planar (off by {d:.3g} m); split into triangles"
-                             for f, d in report.nonplanar),
-                 patch_obstruction=data["obstruction"][parent])
+        bad = int(cut.face_surface[report.degenerate[0]])
+        raise SceneError(f"{path}:{model.line[bad]}: surface {bad + 1} ({model.names[bad]}) has zero area")
+    surface = cut.face_surface[patches.patch_face]
+    emissivity = np.asarray(model.emissivity)
+    rho = np.repeat((1.0 - emissivity[surface])[:, None], 3, axis=1)
+    notes = list(model.notes) + cut.notes
+    notes += [f"{path}:{model.line[cut.face_surface[f]]}: surface {cut.face_surface[f] + 1} is not planar "
+              f"(off by {d:.3g} m); split into triangles" for f, d in report.nonplanar]
+    if model.emittances:
+        notes.append(f"{path}: emit=1 asks for Hottel's script-F (reflections included); radiosity "
+                     "computes black view factors F and ignores it (the emissivities are kept as "
+                     "reflectance 1 - emit for a grey-body solve)")
+    for note in notes:
+        warnings.warn(note, RadiosityWarning, stacklevel=3)
+    return Scene(objects=list(cut.objects), patch_quads=patches.quads, patch_object=cut.surface_object[surface],
+                 patch_face=surface, reflectance=np.clip(rho, 0.0, 0.999), emission=np.zeros((len(surface), 3)),
+                 max_patch_size=max_patch_size, source=str(path), notes=tuple(notes),
+                 patch_obstruction=np.asarray(model.obstruction)[surface], enclosure=model.enclosure)
 
 
 def bundled_scene(name: str = "cornell_box") -> Path:

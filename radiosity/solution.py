@@ -142,7 +142,8 @@ class Solution:
             "traced_pairs": getattr(fill, "n_traced_pairs", None),
             "rays": getattr(fill, "n_rays", None),
             "solver": {"method": self.solver.method, "iterations": self.solver.iterations,
-                       "residual": self.solver.residual} if self.solver else None,
+                       "residual": self.solver.residual,
+                       "fallback": self.solver.fallback} if self.solver else None,
             "energy_W": self.energy,
             "notes": list(scene.notes),
         }

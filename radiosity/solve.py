@@ -18,7 +18,7 @@ from .solution import Solution
 from .system import energy_balance, solve_system
 from .visibility import Visibility
 
-__all__ = ["solve", "view_factors", "prepare"]
+__all__ = ["solve", "view_factors", "compute_view_factors", "prepare"]
 
 
 @dataclass
@@ -157,23 +157,87 @@ def _without(F: sp.csr_matrix, inactive: np.ndarray) -> sp.csr_matrix:
     return (keep @ F @ keep).tocsr()
 
 
-def view_factors(scene: Scene, *, preset: str = "default", enforce: str = "none", **overrides) -> sp.csr_matrix:
+ENFORCE = ("none", "reciprocity", "closure", "auto")
+
+
+def compute_view_factors(scene: Scene, *, preset: str = "default", enforce: str = "none", force: bool = False,
+                         **overrides) -> "ViewFactors":
+    """The view-factor matrix together with the patches it belongs to.
+
+    Same parameters as :func:`view_factors`; the result also carries the scene as filled
+    (``ViewFactors.scene``: cut further if ``max_patch_size`` asked for it), its sky factors,
+    and sums back to objects or faces (``ViewFactors.grouped``).
+
+    Returns
+    -------
+    radiosity.factors.ViewFactors
+
+    Examples
+    --------
+    >>> import radiosity
+    >>> scene = radiosity.load_scene(radiosity.bundled_scene("unit_cube"))
+    >>> vf = radiosity.compute_view_factors(scene, max_patch_size=0.25, cache=False)
+    >>> vf.F.shape == (vf.scene.n_patches, vf.scene.n_patches), len(vf.scene.patch_area)
+    (True, 96)
+    """
+    from .enclosure import check_closed, enforce_reciprocity
+    from .factors import ViewFactors
+
+    if enforce not in ENFORCE:
+        raise TypeError(f"unknown enforce {enforce!r}; valid: {', '.join(ENFORCE)}")
+    if enforce == "auto":  # what the model file asks for (View3D encl=1), else nothing
+        enforce = "closure" if getattr(scene, "enclosure", False) else "none"
+    # The matrix is the product here: each factor to 1e-6 (or tighter) unless asked; partly
+    # occluded pairs then take exact shadow clipping ("auto" with visibility_rtol 1e-6).
+    tight = {"formfactor_rtol": 1e-6, "visibility_rtol": 1e-6}
+    if preset in PRESETS:
+        tight = {k: min(v, getattr(PRESETS[preset], k)) for k, v in tight.items()}
+    overrides = {**tight, **overrides}
+    options = Options.from_preset(preset, **overrides)
+    if options.max_patch_size is None:
+        options = Options.from_preset(preset, **{**overrides, "patch_size_rel": np.inf})
+    prepared = prepare(scene, options)
+    cut = prepared.scene
+    active = ~_inactive(cut)
+    F = _without(prepared.F, ~active)
+    settings = {"preset": preset, "formfactor_rtol": options.formfactor_rtol,
+                "visibility_rtol": options.visibility_rtol}
+    if enforce == "closure" and not force:
+        check_closed(F, active, options.formfactor_rtol + options.visibility_rtol, names=cut.objects,
+                     patch_object=cut.patch_object)
+    if enforce != "none" and active.any():
+        keep = np.flatnonzero(active)
+        block = enforce_reciprocity(F[keep][:, keep], cut.patch_area[keep], closure=enforce == "closure")
+        block = block.tocoo()
+        F = sp.csr_matrix((block.data, (keep[block.row], keep[block.col])), shape=F.shape)
+    return ViewFactors(F, cut, enforce, settings)
+
+
+def view_factors(scene: Scene, *, preset: str = "default", enforce: str = "none", force: bool = False,
+                 **overrides) -> sp.csr_matrix:
     """The patch-to-patch view-factor matrix F with occlusion: F[i, j] = F(i -> j).
 
     Row i holds the fractions of patch i's emitted power reaching each patch j. The patches
     are the scene's as loaded (``max_patch_size`` at load time), unless ``max_patch_size`` is
-    given here; unlike :func:`solve`, presets never cut patches further. Obstructions (View3D
-    ``O`` surfaces) block but have zero rows and columns.
+    given here; unlike :func:`solve`, presets never cut patches further. If the matrix must
+    come with the patches it belongs to (``max_patch_size`` given here), use
+    :func:`compute_view_factors`. Obstructions (View3D ``O`` surfaces) block but have zero rows
+    and columns.
 
     Parameters
     ----------
     scene : Scene
     preset : {"draft", "default", "fine"}, default: "default"
         Quadrature and visibility accuracy.
-    enforce : {"none", "reciprocity", "closure"}, default: "none"
+    enforce : {"none", "reciprocity", "closure", "auto"}, default: "none"
         Make ``A_i F_ij = A_j F_ji`` exact by symmetrising exchange areas; ``"closure"`` also
-        scales them symmetrically so rows sum to 1 (closed enclosures only). See
+        scales them symmetrically so rows sum to 1 (closed enclosures only). ``"auto"``: what
+        the model asks for (closure for a View3D model with ``encl=1``, else none). See
         :mod:`radiosity.enclosure`.
+    force : bool, default: False
+        Enforce closure even where rows fall short of 1 by more than the fill's error.
+        Without it, ``enforce="closure"`` on a scene that is not closed raises
+        :class:`radiosity.enclosure.NotClosedError`.
     **overrides
         Fields of :class:`radiosity.options.Options`; ``formfactor_rtol`` and
         ``visibility_rtol`` default to 1e-6 here (each factor to about six digits, partly
@@ -187,21 +251,4 @@ def view_factors(scene: Scene, *, preset: str = "default", enforce: str = "none"
     >>> bool(np.allclose(F.sum(axis=1), 1.0, atol=1e-6))
     True
     """
-    from .enclosure import enforce_reciprocity
-
-    if enforce not in ("none", "reciprocity", "closure"):
-        raise TypeError(f"unknown enforce {enforce!r}; valid: none, reciprocity, closure")
-    # The matrix is the product here: each factor to 1e-6 (or tighter) unless asked; partly
-    # occluded pairs then take exact shadow clipping ("auto" with visibility_rtol 1e-6).
-    tight = {"formfactor_rtol": 1e-6, "visibility_rtol": 1e-6}
-    if preset in PRESETS:
-        tight = {k: min(v, getattr(PRESETS[preset], k)) for k, v in tight.items()}
-    overrides = {**tight, **overrides}
-    options = Options.from_preset(preset, **overrides)
-    if options.max_patch_size is None:
-        options = Options.from_preset(preset, **{**overrides, "patch_size_rel": np.inf})
-    prepared = prepare(scene, options)
-    F = _without(prepared.F, _inactive(prepared.scene))
-    if enforce != "none":
-        F = enforce_reciprocity(F, prepared.scene.patch_area, closure=enforce == "closure")
-    return F
+    return compute_view_factors(scene, preset=preset, enforce=enforce, force=force, **overrides).F

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ._errors import RadiosityWarning
+from ._errors import RadiosityError, RadiosityWarning
 
 __all__ = ["SolverReport", "solve_system", "energy_balance", "SOLVERS"]
 
@@ -18,12 +18,26 @@ SOLVERS = ("auto", "direct", "bicgstab", "gmres", "jacobi", "gauss-seidel", "pro
 # Below this many unknowns a sparse LU is cheaper than setting up a Krylov solve.
 DIRECT_MAX = 1500
 
+# An iterative solve is accepted when its relative residual is within this factor of ``rtol``
+# (progressive refinement stops on unshot power, which bounds the residual only up to the
+# reflectances), and never above ACCEPT_MAX: a result worse than that is not called a solution.
+ACCEPT_FACTOR = 100.0
+ACCEPT_MAX = 1e-6
+
 
 @dataclass
 class SolverReport:
+    """What the solver did, per RGB channel.
+
+    ``method`` is the solver asked for (``auto`` resolved); ``fallback`` names, per channel, the
+    solver that produced the answer when the first one stopped at its cap without converging
+    (``None`` where it converged).
+    """
+
     method: str
     iterations: list[int]
     residual: list[float]  # ||(I - rho F) B - E|| / ||E|| per channel
+    fallback: list[str | None] = field(default_factory=list)
 
 
 def _operator(F: sp.csr_matrix, rho: np.ndarray) -> sp.csr_matrix:
@@ -82,6 +96,56 @@ def progressive(F: sp.csr_matrix, area: np.ndarray, rho: np.ndarray, e: np.ndarr
     return b, maxiter
 
 
+def accepted_residual(rtol: float) -> float:
+    """The largest relative residual a solve with tolerance ``rtol`` may end with."""
+    return min(max(ACCEPT_FACTOR * rtol, 1e-12), ACCEPT_MAX)
+
+
+def _direct(A: sp.csr_matrix, e: np.ndarray) -> np.ndarray:
+    return spla.spsolve(A.tocsc(), e)
+
+
+def _first_attempt(method, F, r, e, area, A, rtol):
+    """The asked-for solver's answer and iteration count (it may have stopped at its cap)."""
+    if method == "direct":
+        return _direct(A, e), 1
+    if method in ("bicgstab", "gmres"):
+        counter = [0]
+
+        def count(_):
+            counter[0] += 1
+
+        fn = spla.bicgstab if method == "bicgstab" else spla.gmres
+        kwargs = {"callback_type": "pr_norm"} if method == "gmres" else {}
+        x, _info = fn(A, e, x0=e.copy(), rtol=rtol, atol=0.0, maxiter=1000, callback=count, **kwargs)
+        return x, counter[0]
+    if method in ("jacobi", "gauss-seidel"):
+        return _stationary(F, r, e, rtol, method == "gauss-seidel")
+    return progressive(F, area, r, e, rtol)
+
+
+def _fall_back(method, F, r, e, area, A, rtol) -> tuple[np.ndarray, str, float]:
+    """Answer with the first solver that converges, after ``method`` stopped at its cap.
+
+    Krylov solvers come first (no fill-in); a direct LU last, after the memory check. A system
+    no solver can bring to the accepted residual is refused rather than returned.
+    """
+    residual = np.inf
+    for other in ("gmres", "direct"):
+        if other == method:
+            continue
+        if other == "direct":
+            from . import _memory
+
+            _memory.check_solve(A.shape[0], A.nnz, "direct")
+        x, _ = _first_attempt(other, F, r, e, area, A, rtol)
+        residual = _relative_residual(A, e, x)
+        if residual <= accepted_residual(rtol):
+            return x, other, residual
+    raise RadiosityError(f"the radiosity system did not converge with {method}, gmres or a direct solve "
+                         f"(best residual {residual:.1e}); are reflectances near 1 in a closed scene?")
+
+
 def solve_system(F: sp.csr_matrix, rho: np.ndarray, emission: np.ndarray, area: np.ndarray, *,
                  method: str = "auto", rtol: float = 1e-10) -> tuple[np.ndarray, SolverReport]:
     """Solve (I - rho F) B = E for each channel of ``emission`` (n, 3)."""
@@ -98,29 +162,20 @@ def solve_system(F: sp.csr_matrix, rho: np.ndarray, emission: np.ndarray, area: 
         if not e.any():
             report.iterations.append(0)
             report.residual.append(0.0)
+            report.fallback.append(None)
             continue
-        if method == "direct":
-            x, it = spla.spsolve(A.tocsc(), e), 1
-        elif method in ("bicgstab", "gmres"):
-            counter = [0]
-
-            def count(_):
-                counter[0] += 1
-
-            fn = spla.bicgstab if method == "bicgstab" else spla.gmres
-            x, info = fn(A, e, x0=e.copy(), rtol=rtol, atol=0.0, maxiter=1000, callback=count)
-            it = counter[0]
-            if info != 0:
-                warnings.warn(f"{method} did not converge (info={info}); falling back to a direct solve",
-                              RadiosityWarning, stacklevel=3)
-                x = spla.spsolve(A.tocsc(), e)
-        elif method in ("jacobi", "gauss-seidel"):
-            x, it = _stationary(F, r, e, rtol, method == "gauss-seidel")
-        else:
-            x, it = progressive(F, area, r, e, rtol)
+        x, it = _first_attempt(method, F, r, e, area, A, rtol)
+        residual = _relative_residual(A, e, x)
+        fallback = None
+        if not residual <= accepted_residual(rtol):
+            x, fallback, residual = _fall_back(method, F, r, e, area, A, rtol)
+            warnings.warn(f"{method} stopped after {it:,} iterations without converging; channel {c} "
+                          f"was solved with {fallback} instead (residual {residual:.1e})",
+                          RadiosityWarning, stacklevel=2)
         out[:, c] = x
         report.iterations.append(int(it))
-        report.residual.append(_relative_residual(A, e, x))
+        report.residual.append(residual)
+        report.fallback.append(fallback)
     return np.clip(out, 0.0, None), report
 
 

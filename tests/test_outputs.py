@@ -179,7 +179,7 @@ def test_view_factor_file_has_hidden_flags(tmp_path, capsys):
     capsys.readouterr()
     scene = radiosity.load_scene(scene_path)
     with np.load(target) as z:
-        hidden = z["hidden"]
+        hidden = z["patch_hidden"]
         indptr = z["indptr"]
     assert hidden.dtype == bool and hidden.shape == (scene.n_patches,)
     np.testing.assert_array_equal(hidden, scene.patch_hidden)

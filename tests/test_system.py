@@ -106,3 +106,42 @@ def test_materials_change_does_not_change_geometry_hash():
     assert recoloured.geometry_hash == scene.geometry_hash
     with pytest.raises(radiosity.SceneError):
         scene.with_materials(reflectance=1.0)
+
+
+def closed_box_near_white(n: int = 24):
+    """A random closed enclosure with rho = 0.999 everywhere: B = E / (1 - rho) = 1000."""
+    F, area = random_enclosure(n, seed=3)
+    return F, area, np.full((n, 3), 0.999), np.ones((n, 3))
+
+
+@pytest.mark.parametrize("method", ["progressive", "jacobi"])
+def test_a_solver_that_stops_at_its_cap_says_so_and_falls_back(method, monkeypatch):
+    """Issue 19: progressive stopped at 50 n shots with B = 97 instead of 1000, exit 0."""
+    import radiosity.system as system
+
+    F, area, rho, e = closed_box_near_white()
+    if method == "jacobi":  # cap the sweeps far below what rho = 0.999 needs
+        original = system._stationary
+        monkeypatch.setattr(system, "_stationary",
+                            lambda *a, **k: original(*a, **{**k, "maxiter": 50}))
+    with pytest.warns(radiosity.RadiosityWarning, match=f"{method} stopped after .* instead"):
+        b, report = solve_system(F, rho, e, area, method=method, rtol=1e-10)
+    np.testing.assert_allclose(b, 1000.0, rtol=1e-7)
+    assert report.fallback == ["gmres"] * 3 or report.fallback == ["direct"] * 3
+    assert max(report.residual) <= 1e-8
+
+
+def test_a_converged_solve_reports_no_fallback():
+    F, area, rho, e = closed_box_near_white()
+    b, report = solve_system(F, np.full_like(rho, 0.5), e, area, method="progressive", rtol=1e-12)
+    np.testing.assert_allclose(b, 2.0, rtol=1e-8)
+    assert report.fallback == [None] * 3
+
+
+def test_a_system_no_solver_can_solve_is_refused(monkeypatch):
+    import radiosity.system as system
+
+    F, area, rho, e = closed_box_near_white()
+    monkeypatch.setattr(system, "_relative_residual", lambda A, b, x: 1.0)
+    with pytest.raises(radiosity.RadiosityError, match="did not converge"):
+        solve_system(F, rho, e, area, method="bicgstab")

@@ -1,9 +1,9 @@
-"""The ``radiosity`` command: solve, view, viewfactors, cache. ``main(argv)`` returns the exit code.
+"""The ``radiosity`` command: solve, view, viewfactors, exchange, cache. ``main(argv)`` returns the exit code.
 
 Bad input (a ``RadiosityError``, ``ValueError`` or ``OSError``, a request too big for the
 machine, a bad command line) ends with exactly one line on stderr, ``radiosity: error: ...``,
 and exit status 2; ``--debug`` shows the traceback instead. Ctrl-C ends with one line and
-exit status 130; outputs are written through a staging folder and the cache atomically, so
+exit status 130 (SIGTERM: 143), also during the imports (``radiosity._startup``); outputs are written through a staging folder and the cache atomically, so
 neither is left half-written. Anything else is a bug: ``radiosity: internal error: ...`` with
 how to report it, exit status 1 (``--debug`` shows the traceback).
 
@@ -14,21 +14,23 @@ Scene notes (``RadiosityWarning``: a non-planar face split, no emitter, ...) are
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import warnings
 
 from .._errors import MemoryBudgetError, RadiosityError, RadiosityWarning
-from . import _cache, _solve, _view, _viewfactors
+from .._startup import INTERRUPTED_LINE, PROG, exit_status, guard_imports
 
-__all__ = ["main"]
+with guard_imports():
+    from . import _cache, _exchange, _solve, _view, _viewfactors
+
+__all__ = ["main", "entry"]
 
 EXIT_OK = 0
 EXIT_INTERNAL = 1
 EXIT_BAD_INPUT = 2
-EXIT_INTERRUPTED = 130
-PROG = "radiosity"
 DESCRIPTION = ("Diffuse radiosity and exact view factors on polygon meshes. Exit status: 0 success, "
-               "1 internal error, 2 bad input, 130 interrupted.")
+               "1 internal error, 2 bad input, 130 interrupted (143 on SIGTERM).")
 REPORT_HINT = ("this is a bug in radiosity, not in your input; please report it with the command line, "
                "the output of 'radiosity --version' and the traceback that --debug prints")
 
@@ -55,7 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="print the version and exit")
     parser.add_argument("--debug", action="store_true", help="show tracebacks for bad input and internal errors")
     sub = parser.add_subparsers(dest="command", required=True)
-    for module in (_solve, _view, _viewfactors, _cache):
+    for module in (_solve, _view, _viewfactors, _exchange, _cache):
         p = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP)
         p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                        help="show tracebacks for bad input and internal errors")
@@ -87,7 +89,8 @@ def _internal_error(exc: BaseException) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the command line; returns the exit status (0 ok, 1 internal error, 2 bad input, 130 interrupted)."""
+    """Run the command line; returns the exit status (0 ok, 1 internal error, 2 bad input, 130 Ctrl-C,
+    143 SIGTERM)."""
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -100,9 +103,16 @@ def main(argv: list[str] | None = None) -> int:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", RadiosityWarning)
             code = int(args.run(args))
-    except KeyboardInterrupt:
-        print(f"{PROG}: interrupted; earlier outputs and the cache are left as they were", file=sys.stderr)
-        return EXIT_INTERRUPTED
+    except KeyboardInterrupt as exc:
+        return _interrupted(exc)
+    except SystemError as exc:
+        # Ctrl-C inside a compiled kernel surfaces as "<function> returned a result with an
+        # exception set", the KeyboardInterrupt as its cause.
+        if not _is_interrupt(exc):
+            if args.debug:
+                raise
+            return _internal_error(exc)
+        return _interrupted(exc)
     except MemoryBudgetError as exc:
         if args.debug:
             raise
@@ -122,6 +132,42 @@ def main(argv: list[str] | None = None) -> int:
         return _internal_error(exc)
     _report_warnings(caught, show_notes=not args.shows_notes)
     return code
+
+
+def _interrupted(exc: BaseException) -> int:
+    """One line, and 130 for Ctrl-C or 143 for SIGTERM."""
+    print(INTERRUPTED_LINE, file=sys.stderr)
+    return exit_status(exc)
+
+
+def _is_interrupt(exc: BaseException | None) -> bool:
+    """Whether ``exc`` is, or was raised while handling, a Ctrl-C or SIGTERM."""
+    while exc is not None:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
+def entry() -> None:
+    """The console script: ``main``, then an exit that cannot crash on the way out.
+
+    numba's and Embree's worker threads may still exist when ``main`` returns; a Ctrl-C that
+    lands while the interpreter tears down under them crashed it (segfaults, numba
+    ``SystemError``). Every output is written, renamed and closed by then (the staging folder and
+    the cache are handled in ``finally`` blocks inside ``main``), so the process flushes its
+    streams and leaves at once with the status ``main`` chose.
+    """
+    try:
+        code = main()
+    except KeyboardInterrupt as exc:  # between main's own handlers, e.g. while printing the summary
+        code = _interrupted(exc)
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except (KeyboardInterrupt, OSError):  # a closed pipe, or a second Ctrl-C
+        pass
+    os._exit(code)
 
 
 def _report_warnings(caught, *, show_notes: bool) -> None:

@@ -54,7 +54,9 @@ def format_summary(solution, load_seconds: float, compile_seconds: float = 0.0) 
     lines.append("time (s)   " + "   ".join(f"{k} {v:.2f}" for k, v in times.items())
                  + (f"   (and compiling kernels {compile_seconds:.1f}, first run only)" if compile_seconds >= 0.5 else ""))
     sol = s["solver"]
-    lines.append(f"solver     {sol['method']}, iterations {sol['iterations']}, residual {max(sol['residual']):.1e}")
+    fallback = sorted({f for f in sol.get("fallback", []) if f})
+    lines.append(f"solver     {sol['method']}, iterations {sol['iterations']}, residual {max(sol['residual']):.1e}"
+                 + (f"   (stopped at its cap: solved with {', '.join(fallback)})" if fallback else ""))
     e = s["energy_W"]
     em, ab, es = (np.array(e[k]) for k in ("emitted", "absorbed", "escaped"))
     lines.append("energy (W) emitted " + fmt3(em) + "  absorbed " + fmt3(ab) + "  escaped " + fmt3(es))

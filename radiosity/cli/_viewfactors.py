@@ -1,40 +1,88 @@
-"""``radiosity viewfactors``: write the view-factor matrix of a scene (scipy sparse .npz)."""
+"""``radiosity viewfactors``: the view-factor matrix of a scene, with the patches it belongs to.
+
+Everything is computed and checked before anything is written; all outputs (``F.npz``, and
+``--vf``, ``--vs3`` if asked) are then written to temporary files and renamed into place
+together, so an error never leaves a file behind (and never replaces an earlier one).
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from ..enclosure import diagnose
-from ..io.export import write_view_factors
+from ..factors import GROUPINGS
+from ..io.export import atomic_paths, save_arrays, view_factor_arrays, write_vf
 from ..io.view3d import write_vs3
-from ..solve import view_factors
+from ..solve import compute_view_factors
 from ._common import add_scene_args, load, overrides
 
 NAME = "viewfactors"
 HELP = "compute the patch-to-patch view-factor matrix F (F[i, j] = F(i -> j)) with occlusion"
+# Up to this many surfaces, the summary lists each one's row sum and sky factor.
+_LIST_SURFACES = 40
 
 
 def add_args(parser) -> None:
     add_scene_args(parser, optional_scene=False)
-    parser.add_argument("-o", "--output", type=Path, required=True, metavar="F.npz", help="output .npz")
-    parser.add_argument("--enforce", choices=("none", "reciprocity", "closure"), default="none",
+    parser.add_argument("-o", "--output", type=Path, required=True, metavar="F.npz",
+                        help="output .npz: F with its patches (polygons, areas, objects, faces, hidden "
+                             "flags, sky factors)")
+    parser.add_argument("--enforce", choices=("auto", "none", "reciprocity", "closure"), default="auto",
                         help="symmetrise exchange areas (reciprocity) and also scale rows to 1 (closure, "
-                             "closed enclosures only)")
+                             "closed enclosures only); auto (default): closure if a View3D model says "
+                             "encl=1, else none")
+    parser.add_argument("--force", action="store_true",
+                        help="enforce closure even where rows fall short of 1 by more than the fill's error")
+    parser.add_argument("--sum", choices=GROUPINGS, default=None, dest="group_by",
+                        help="also sum F back to the input surfaces (objects, or faces: a View3D model's "
+                             "S lines) and store that matrix in the .npz (group_*)")
+    parser.add_argument("--vf", type=Path, default=None, metavar="F.vf",
+                        help="also write View3D's view-factor file (per patch, or per --sum surface)")
+    parser.add_argument("--vf-binary", action="store_true", help="write the --vf file in View3D's binary format")
     parser.add_argument("--vs3", type=Path, default=None, metavar="MODEL.vs3",
                         help="also write the patches as a View3D model")
 
 
 def run(args) -> int:
     scene = load(args)
-    F = view_factors(scene, preset=args.preset, enforce=args.enforce, **overrides(args))
-    write_view_factors(F, scene.patch_area, scene.patch_object, scene.objects, args.output,
-                       hidden=scene.patch_hidden)
-    d = diagnose(F, scene.patch_area)
-    print(f"{scene.n_patches} patches, {F.nnz:,} non-zero view factors")
-    print(f"row sums {d.row_sums.min():.8f} .. {d.row_sums.max():.8f}; "
-          f"reciprocity error {d.reciprocity_error:.2e} (max |A_i F_ij - A_j F_ji| / max A_i F_ij)")
-    print(f"wrote {args.output}")
-    if args.vs3 is not None:
-        write_vs3(scene, args.vs3)
-        print(f"wrote {args.vs3}")
+    vf = compute_view_factors(scene, preset=args.preset, enforce=args.enforce, force=args.force, **overrides(args))
+    cut = vf.scene
+    grouped = vf.grouped(args.group_by) if args.group_by else None
+    arrays = view_factor_arrays(vf, grouped=grouped)
+    d = diagnose(vf.F, cut.patch_area)
+    active = vf.active
+    targets = [args.output] + [p for p in (args.vf, args.vs3) if p is not None]
+    with atomic_paths(targets) as temps:
+        save_arrays(arrays, temps[0])
+        rest = iter(temps[1:])
+        if args.vf is not None:
+            if grouped is not None:
+                write_vf(grouped.F, grouped.area, grouped.emissivity, next(rest), binary=args.vf_binary,
+                         enclosure=vf.enforced == "closure")
+            else:
+                keep = np.flatnonzero(active)
+                write_vf(vf.F[keep][:, keep], cut.patch_area[keep], 1.0 - cut.reflectance[keep].mean(axis=1),
+                         next(rest), binary=args.vf_binary, enclosure=vf.enforced == "closure")
+        if args.vs3 is not None:
+            write_vs3(cut, next(rest))
+    _print_summary(vf, d, grouped, args.enforce)
+    for target in targets:
+        print(f"wrote {target}")
     return 0
+
+
+def _print_summary(vf, d, grouped, asked: str) -> None:
+    cut, active = vf.scene, vf.active
+    rows = d.row_sums[active] if active.any() else np.zeros(1)
+    sky = vf.sky_factor[active] if active.any() else np.zeros(1)
+    print(f"{cut.n_patches} patches ({int(active.sum())} exchanging light), {vf.F.nnz:,} non-zero view factors")
+    print(f"row sums {rows.min():.8f} .. {rows.max():.8f}; sky factor (1 - row sum) {sky.min():.3g} .. "
+          f"{sky.max():.3g}; reciprocity error {d.reciprocity_error:.2e} (max |A_i F_ij - A_j F_ji| / max A_i F_ij)")
+    if vf.enforced != "none" or asked == "auto":
+        print(f"enforced: {vf.enforced}")
+    if grouped is not None and len(grouped.names) <= _LIST_SURFACES:
+        print(f"{'surface':<24} {'area m2':>10} {'row sum':>11} {'sky factor':>11}")
+        for name, area, row, escape in zip(grouped.names, grouped.area, grouped.row_sums, grouped.sky_factor):
+            print(f"{name[:24]:<24} {area:>10.4g} {row:>11.8f} {escape:>11.3g}")

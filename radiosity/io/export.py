@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["atomic_path", "staged_outputs", "triangles", "write_glb", "write_summary", "write_ply", "write_vtp", "write_png", "write_view_factors"]
+__all__ = ["atomic_path", "atomic_paths", "staged_outputs", "triangles", "write_summary", "write_ply",
+           "write_vtp", "write_png", "write_glb", "write_view_factors", "view_factor_arrays", "write_vf"]
 
 
 @contextlib.contextmanager
@@ -36,6 +37,37 @@ def atomic_path(target: str | Path):
     finally:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+
+
+@contextlib.contextmanager
+def atomic_paths(targets: list[str | Path]):
+    """Temporary paths beside each target, all renamed onto their targets only if the block succeeds.
+
+    A run that writes several files (``F.npz`` and ``F.vf``) either leaves all of them new or
+    all of them as they were, never one of each (short of a failure between two renames).
+    """
+    targets = [Path(t) for t in targets]
+    if len({t.resolve() for t in targets}) != len(targets):
+        raise ValueError(f"two outputs go to the same file: {', '.join(map(str, targets))}")
+    with contextlib.ExitStack() as stack:
+        temps = []
+        for target in targets:
+            target.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.stem}-", suffix=target.suffix)
+            os.close(fd)
+            stack.callback(_unlink, tmp)
+            temps.append(Path(tmp))
+        yield temps
+        umask = os.umask(0)
+        os.umask(umask)
+        for tmp, target in zip(temps, targets):
+            os.chmod(tmp, 0o666 & ~umask)
+            os.replace(tmp, target)
+
+
+def _unlink(path) -> None:
+    with contextlib.suppress(FileNotFoundError):
+        os.unlink(path)
 
 
 STAGING_PREFIX = ".radiosity-partial-"
@@ -162,15 +194,158 @@ def write_png(solution, path: str | Path, **kwargs) -> float:
         return render(solution, tmp, **kwargs)
 
 
-def write_view_factors(F: sp.csr_matrix, area: np.ndarray, patch_object: np.ndarray, objects: list[str],
-                       path: str | Path, hidden: np.ndarray | None = None) -> None:
-    """``F.npz`` readable by ``scipy.sparse.load_npz``, plus ``area``, ``patch_object``, ``objects``
-    and ``hidden`` (patches under a contact, whose rows and columns are zero)."""
-    F = F.tocsr()
-    hidden = np.zeros(F.shape[0], dtype=bool) if hidden is None else np.asarray(hidden, dtype=bool)
+def write_view_factors(F, area: np.ndarray | None = None, patch_object: np.ndarray | None = None,
+                       objects: list[str] | None = None, path: str | Path | None = None, *, grouped=None) -> None:
+    """``F.npz`` readable by ``scipy.sparse.load_npz``, with the patches it belongs to.
+
+    Either ``write_view_factors(vf, path=...)`` with a :class:`radiosity.factors.ViewFactors`
+    (everything below is taken from it, so the file is consistent by construction), or the
+    older ``write_view_factors(F, area, patch_object, objects, path)``.
+
+    Besides the matrix (``format``, ``shape``, ``data``, ``indices``, ``indptr``) the file holds
+    ``area``, ``patch_object``, ``objects`` and, from a ViewFactors, ``patch_quads``,
+    ``patch_face``, ``patch_hidden``, ``patch_obstruction``, ``sky_factor``, ``enforced``,
+    ``formfactor_rtol``, ``visibility_rtol``; with ``grouped`` (a
+    :class:`radiosity.factors.SurfaceFactors`) also ``group_by``, ``group_names``,
+    ``group_area``, ``group_sky_factor``, ``patch_group`` and the summed matrix as
+    ``group_data``, ``group_indices``, ``group_indptr``, ``group_shape`` (CSR).
+
+    Raises
+    ------
+    ValueError
+        Arrays that do not belong to the matrix (lengths differ from its size).
+    """
+    if path is None and isinstance(area, (str, Path)):
+        path, area = area, None
+    arrays = view_factor_arrays(F, area, patch_object, objects, grouped=grouped)
+    with atomic_path(path) as tmp:
+        save_arrays(arrays, tmp)
+
+
+def save_arrays(arrays: dict, path: Path) -> None:
+    with open(path, "wb") as fh:
+        np.savez_compressed(fh, **arrays)
+
+
+def view_factor_arrays(F, area=None, patch_object=None, objects=None, *, grouped=None) -> dict:
+    """The arrays of a view-factor ``.npz`` (see :func:`write_view_factors`), checked for size."""
+    extra = {}
+    if hasattr(F, "scene"):  # a ViewFactors
+        vf, scene = F, F.scene
+        F, area, patch_object, objects = vf.F, scene.patch_area, scene.patch_object, scene.objects
+        extra = {"patch_quads": scene.patch_quads, "patch_face": scene.patch_face, "patch_hidden": scene.patch_hidden,
+                 "patch_obstruction": scene.patch_obstruction, "sky_factor": vf.sky_factor,
+                 "enforced": np.array(vf.enforced), **{k: np.array(v) for k, v in vf.settings.items()}}
+    F = sp.csr_matrix(F)
+    n = F.shape[0]
+    if F.shape != (n, n) or len(area) != n or len(patch_object) != n:
+        msg = (f"view-factor matrix {F.shape} with {len(area)} areas and {len(patch_object)} patch objects: "
+               "they must all describe the same patches")
+        raise ValueError(msg)
+    arrays = {"format": np.array("csr"), "shape": np.array(F.shape), "data": F.data, "indices": F.indices,
+              "indptr": F.indptr, "area": np.asarray(area), "patch_object": np.asarray(patch_object),
+              "objects": np.array(objects), **extra}
+    if grouped is not None:
+        G = grouped.F.tocsr()
+        arrays.update(group_by=np.array(grouped.by), group_names=np.array(grouped.names), group_area=grouped.area,
+                      group_sky_factor=grouped.sky_factor, group_emissivity=grouped.emissivity,
+                      patch_group=grouped.patch_group, group_data=G.data, group_indices=G.indices,
+                      group_indptr=G.indptr, group_shape=np.array(G.shape))
+    return arrays
+
+
+# View3D's view-factor files (savevf.c of View3D 3.3): a header line of 30 characters plus the
+# line end, "program version format encl emit N"; then the N areas, the N x N matrix row by
+# row (F[m, n] = F(m -> n)) and the N emissivities. Format 0 is text, 1 is binary (float32).
+VF_HEADER_WIDTH = 30
+
+
+def vf_header(n: int, *, binary: bool, enclosure: bool, emit: bool = False) -> str:
+    """View3D's header line, ``radiosity <version> <format> <encl> <emit> <N>`` padded to 30."""
+    try:
+        from importlib.metadata import version
+
+        release = version("radiosity")
+    except Exception:  # noqa: BLE001 - not installed: the header still needs a version word
+        release = "0"
+    tail = f" {int(binary)} {int(enclosure)} {int(emit)} {n}"
+    head = f"radiosity {release}"[: VF_HEADER_WIDTH - len(tail)].rstrip()
+    header = head + tail
+    if len(header) > VF_HEADER_WIDTH:
+        raise ValueError(f"{n} surfaces do not fit View3D's {VF_HEADER_WIDTH}-character header")
+    return header.ljust(VF_HEADER_WIDTH)
+
+
+def write_vf(F: sp.spmatrix, area: np.ndarray, emissivity: np.ndarray, path: str | Path, *, binary: bool = False,
+             enclosure: bool = False, digits: int = 6) -> None:
+    """Write F in View3D's output format (``.vf``), text (View3D's ``out=0``) or binary (``out=1``).
+
+    Parameters
+    ----------
+    F : (n, n) sparse
+        F[m, n] = F(m -> n); written dense, one row at a time.
+    area : (n,) float
+        Surface areas, m^2.
+    emissivity : (n,) float
+        Written as the last record (View3D's ``emit`` column).
+    path : str or Path
+    binary : bool, default: False
+        View3D's binary layout: a 32-byte header ending in CR LF, then little-endian float32
+        areas, rows and emissivities.
+    enclosure : bool, default: False
+        The ``encl`` flag of the header.
+    digits : int, default: 6
+        Decimals of the text matrix (View3D writes 6, which rounds factors under 5e-7 to 0).
+
+    Examples
+    --------
+    >>> import numpy as np, scipy.sparse as sp, tempfile, pathlib
+    >>> out = pathlib.Path(tempfile.mkdtemp()) / "F.vf"
+    >>> write_vf(sp.csr_matrix(np.array([[0, 1.0], [0.5, 0.5]])), np.array([1.0, 2.0]), np.array([0.9, 0.9]), out)
+    >>> out.read_text().splitlines()[1:]
+    ['1 2', '0.000000 1.000000', '0.500000 0.500000', '0.900 0.900']
+    """
+    F = sp.csr_matrix(F)
+    n = F.shape[0]
+    if F.shape != (n, n) or len(area) != n or len(emissivity) != n:
+        raise ValueError(f"view-factor matrix {F.shape}, {len(area)} areas and {len(emissivity)} emissivities differ")
+    header = vf_header(n, binary=binary, enclosure=enclosure)
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-        np.savez_compressed(fh, format=np.array("csr"), shape=np.array(F.shape), data=F.data, indices=F.indices,
-                            indptr=F.indptr, area=area, patch_object=patch_object, objects=np.array(objects), hidden=hidden)
+        if binary:
+            fh.write(header.encode("ascii") + b"\r\n")
+            fh.write(np.asarray(area, "<f4").tobytes())
+        else:
+            fh.write((header + "\n").encode("ascii"))
+            fh.write((" ".join(f"{a:g}" for a in area) + "\n").encode("ascii"))
+        for start in range(0, n, _VF_ROWS):
+            block = F[start:start + _VF_ROWS].toarray()
+            if binary:
+                fh.write(block.astype("<f4").tobytes())
+            else:
+                fh.write("".join(" ".join(f"{v:.{digits}f}" for v in row) + "\n" for row in block).encode("ascii"))
+        if binary:
+            fh.write(np.asarray(emissivity, "<f4").tobytes())
+        else:
+            fh.write((" ".join(f"{e:.3f}" for e in emissivity) + "\n").encode("ascii"))
+
+
+# Rows of F made dense at a time while writing a .vf (bounded memory for any n).
+_VF_ROWS = 256
+
+
+def read_vf(path: str | Path) -> dict:
+    """Read a View3D ``.vf`` file (text or binary): ``header``, ``area``, ``F`` (dense), ``emissivity``."""
+    raw = Path(path).read_bytes()
+    header = raw[:VF_HEADER_WIDTH].decode("ascii", "replace")
+    words = header.split()
+    fmt, n = int(words[2]), int(words[5])
+    if fmt == 1:
+        values = np.frombuffer(raw[32:], "<f4").astype(float)
+    else:
+        values = np.array(raw[VF_HEADER_WIDTH:].split(), dtype=float)
+    if len(values) != n * (n + 2):
+        raise ValueError(f"{path}: expected {n * (n + 2)} numbers after the header, got {len(values)}")
+    return {"header": header, "area": values[:n], "F": values[n:n + n * n].reshape(n, n), "emissivity": values[-n:]}
 
 
 def linear_colours(radiance: np.ndarray, exposure: float) -> np.ndarray:

@@ -26,12 +26,16 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import SceneError
+from ._text import excerpt, parse_float, read_input, split_lines
 
 __all__ = ["ObjData", "Material", "read_obj", "read_mtl", "MAX_COORDINATE"]
 
 # Largest accepted |coordinate| in file units. A million kilometres in metres: nothing real is
 # modelled beyond it, and squares of larger values start to lose the precision areas need.
 MAX_COORDINATE = 1e9
+# Emitted radiance above this would overflow float32 outputs (PLY) once divided by 1 - rho and
+# multiplied by areas; the brightest real sources are some 1e9 W/(m^2 sr).
+MAX_EMISSION = 1e30
 
 # A file whose first bytes hold this fraction of control characters (or any NUL) is binary.
 _BINARY_FRACTION = 0.1
@@ -75,13 +79,13 @@ class ObjData:
 
 def _floats(tokens: list[str], count: int, where: str, what: str) -> list[float]:
     if len(tokens) < count:
-        raise SceneError(f"{where}: {what} needs {count} numbers, got {len(tokens)}: {' '.join(tokens)!r}")
+        raise SceneError(f"{where}: {what} needs {count} numbers, got {len(tokens)}: {excerpt(' '.join(tokens))!r}")
     try:
-        values = [float(t) for t in tokens[:count]]
+        values = [parse_float(t) for t in tokens[:count]]
     except ValueError:
-        raise SceneError(f"{where}: {what} has a value that is not a number: {' '.join(tokens)!r}") from None
+        raise SceneError(f"{where}: {what} has a value that is not a number: {excerpt(' '.join(tokens))!r}") from None
     if not all(math.isfinite(v) for v in values):
-        raise SceneError(f"{where}: {what} is not finite: {' '.join(tokens)!r}")
+        raise SceneError(f"{where}: {what} is not finite: {excerpt(' '.join(tokens))!r}")
     return values
 
 
@@ -98,7 +102,7 @@ def _read_lines(path: Path, what: str, referenced_from: str = "", notes: list[st
     """(line number, text without comment) of each logical line; continuations joined."""
     origin = f"{referenced_from}: " if referenced_from else ""
     try:
-        data = path.read_bytes()
+        data = read_input(path, what)
     except FileNotFoundError:
         raise SceneError(f"{origin}{what} file '{path}' does not exist") from None
     except IsADirectoryError:
@@ -115,10 +119,7 @@ def _read_lines(path: Path, what: str, referenced_from: str = "", notes: list[st
         text = data.decode("latin-1")
         if notes is not None:
             notes.append(f"{path}: is not UTF-8 (byte {exc.start}); read as Latin-1")
-    if "\n" not in text and "\r" in text:
-        raw_lines = text.split("\r")  # classic Mac line endings
-    else:
-        raw_lines = text.split("\n")
+    raw_lines = split_lines(text)  # CR LF, LF and a lone CR (classic Mac) each end a line
     out: list[tuple[int, str]] = []
     pending: list[str] = []
     start = 0
@@ -168,6 +169,9 @@ def read_mtl(path: Path, referenced_from: str = "", notes: list[str] | None = No
             values = _floats(tokens, 3 if len(tokens) >= 3 else 1, where, keyword)
             if len(values) == 1:
                 values = values * 3
+            if keyword == "Ke" and max(abs(v) for v in values) > MAX_EMISSION:
+                raise SceneError(f"{where}: Ke is beyond {MAX_EMISSION:g} W/(m^2 sr); radiosities and the "
+                                 f"energy balance would overflow: {excerpt(' '.join(tokens))!r}")
             setattr(current, keyword.lower(), tuple(values))
             setattr(current, f"{keyword.lower()}_where", where)
     return materials
