@@ -64,6 +64,19 @@ def test_glb_round_trips_through_trimesh(solution, tmp_path):
     assert all(p["material"] == 0 and "COLOR_0" in p["attributes"] for m in tree["meshes"] for p in m["primitives"])
 
 
+def test_glb_reads_in_pyvista(solution, tmp_path):
+    """VTK's glTF reader (what ParaView uses) sees every object with its colours."""
+    import pyvista as pv
+
+    path = tmp_path / "solution.glb"
+    write_glb(solution, path)
+    blocks = [b for b in pv.read(path).recursive_iterator() if b is not None]
+    assert len(blocks) == len(solution.scene.objects)
+    assert all("COLOR_0" in b.point_data and "_RADIOSITY" in b.point_data for b in blocks)
+    total = sum(b.n_cells for b in blocks)
+    assert total == len(triangles(solution)[1])
+
+
 def _embedded(page: Path) -> dict:
     text = page.read_text()
     blob = re.search(r'<script id="data" type="application/json">(.*?)</script>', text, re.S).group(1)
