@@ -29,6 +29,16 @@ def command_options(args) -> dict:
     return {k: _jsonable(v) for k, v in sorted(vars(args).items()) if k not in skip}
 
 
+def _command_line() -> list[str] | None:
+    """The command line when the process is the ``radiosity`` command (script or ``-m``), else None."""
+    if not sys.argv:
+        return None
+    script = Path(sys.argv[0])
+    if script.name == "radiosity" or (script.name == "__main__.py" and script.parent.name == "radiosity"):
+        return ["radiosity", *sys.argv[1:]]
+    return None
+
+
 def run_record(args, solution, *, exposure: float, load_seconds: float, compile_seconds: float,
                outputs: list[str]) -> dict:
     """The reproducibility block of ``summary.json``: version, preset, options, units, emission,
@@ -39,7 +49,7 @@ def run_record(args, solution, *, exposure: float, load_seconds: float, compile_
     return {
         "version": __version__,
         "python": platform.python_version(),
-        "command": ["radiosity", *sys.argv[1:]] if sys.argv and "radiosity" in Path(sys.argv[0]).name else None,
+        "command": _command_line(),
         "preset": args.preset,
         "options": command_options(args),
         "solver_options": {k: _jsonable(v) for k, v in options.items()},
