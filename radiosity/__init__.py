@@ -13,7 +13,11 @@ compute_view_factors -- the same with the patches it belongs to, sky factors, su
 exchange            -- grey-body radiative exchange (net radiation method): Exchange
 Scene, Solution, Exchange, Options, PRESETS, ViewFactors
 RadiosityError, SceneError, MemoryBudgetError, RadiosityWarning
+__version__         -- the installed package's version (from its metadata)
 """
+
+from importlib.metadata import PackageNotFoundError as _NotInstalled
+from importlib.metadata import version as _version
 
 from ._startup import guard_imports
 
@@ -26,6 +30,11 @@ with guard_imports():  # Ctrl-C during these seconds of imports: one line and ex
     from .scene import Scene, bundled_scene, load_scene
     from .solution import Solution
     from .solve import compute_view_factors, solve, view_factors
+
+try:
+    __version__ = _version("radiosity")
+except _NotInstalled:  # pragma: no cover - run from a source tree that was never installed
+    __version__ = "0+unknown"
 
 __all__ = [
     "point_to_polygon",

@@ -4,10 +4,16 @@ F depends only on the patches and the fill settings, never on materials, so chan
 or a light re-solves from the cached F. Entries are written to a temporary file and renamed,
 and carry a checksum of their payload: a torn or corrupted entry is detected, dropped and
 rebuilt.
+
+The cache is capped (``$RADIOSITY_CACHE_SIZE``, default 2 GiB): after each store the least
+recently used entries (by modification time, which a hit refreshes) are removed until the
+rest fits. The entry just written is always kept. ``radiosity cache info|clear`` shows and
+empties it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -20,9 +26,24 @@ import scipy.sparse as sp
 
 from .assembly import FillSettings, FillStats
 
-__all__ = ["FormFactorCache", "cache_dir"]
+__all__ = ["FormFactorCache", "cache_dir", "cache_limit"]
 
 FORMAT_VERSION = 1
+ENV_SIZE = "RADIOSITY_CACHE_SIZE"
+DEFAULT_LIMIT = 2 << 30  # 2 GiB: a few hundred Cornell-box-sized matrices, a handful of big ones
+
+
+def cache_limit() -> int:
+    """Bytes the cache may hold: ``$RADIOSITY_CACHE_SIZE`` (``500M``, ``4G``, bytes) or 2 GiB."""
+    from ._memory import _parse_bytes
+
+    text = os.environ.get(ENV_SIZE)
+    if not text:
+        return DEFAULT_LIMIT
+    try:
+        return _parse_bytes(text)
+    except ValueError:
+        raise ValueError(f"{ENV_SIZE} must be a number of bytes (e.g. 500M, 4G), got {text!r}") from None
 
 
 def cache_dir() -> Path:
@@ -37,8 +58,9 @@ def cache_dir() -> Path:
 class FormFactorCache:
     """View-factor matrices on disk, one ``.npz`` per (geometry, settings) key."""
 
-    def __init__(self, folder: Path):
+    def __init__(self, folder: Path, limit: int | None = None):
         self.folder = Path(folder)
+        self.limit = limit
 
     @classmethod
     def default(cls) -> "FormFactorCache":
@@ -71,6 +93,7 @@ class FormFactorCache:
                 F = sp.csr_matrix((z["data"], z["indices"], z["indptr"]), shape=tuple(meta["shape"]))
             if meta.get("checksum") != self._checksum(F) or meta.get("geometry") != geometry_hash:
                 raise ValueError("checksum mismatch")
+            _touch(path)  # recently used: the last to be evicted
             return F, FillStats(**meta["stats"])
         except Exception:  # noqa: BLE001 - any unreadable entry is rebuilt, never trusted
             path.unlink(missing_ok=True)
@@ -88,6 +111,7 @@ class FormFactorCache:
             with os.fdopen(fd, "wb") as fh:
                 np.savez(fh, data=F.data, indices=F.indices, indptr=F.indptr, meta=json.dumps(meta))
             os.replace(tmp, path)
+            self.evict(keep=path)
             return path
         except OSError:
             return None
@@ -95,3 +119,64 @@ class FormFactorCache:
             # An interrupted write (Ctrl-C, full disk) leaves no stray temporary file.
             if tmp is not None and os.path.exists(tmp):
                 os.unlink(tmp)
+
+    def entries(self) -> list[tuple[Path, int, float]]:
+        """Cache entries as (path, bytes, last used), least recently used first."""
+        out = []
+        try:
+            candidates = list(self.folder.glob("F-*.npz"))
+        except OSError:
+            return []
+        for path in candidates:
+            try:
+                st = path.stat()
+            except OSError:  # removed meanwhile by another process
+                continue
+            out.append((path, st.st_size, st.st_mtime))
+        return sorted(out, key=lambda e: (e[2], e[0].name))
+
+    def evict(self, *, keep: Path | None = None, limit: int | None = None) -> list[Path]:
+        """Remove least recently used entries until the cache fits ``limit``; returns them."""
+        limit = limit if limit is not None else (self.limit if self.limit is not None else cache_limit())
+        entries = self.entries()
+        total = sum(size for _, size, _ in entries)
+        removed = []
+        for path, size, _ in entries:
+            if total <= limit:
+                break
+            if keep is not None and path == keep:
+                continue
+            try:
+                path.unlink()
+            except OSError:
+                continue
+            total -= size
+            removed.append(path)
+        return removed
+
+    def info(self) -> dict:
+        """Folder, number of entries, bytes held and the cap."""
+        entries = self.entries()
+        return {"folder": str(self.folder), "entries": len(entries), "bytes": sum(e[1] for e in entries),
+                "limit": self.limit if self.limit is not None else cache_limit()}
+
+    def clear(self) -> tuple[int, int]:
+        """Remove every entry (and stray temporary files); returns (entries, bytes) removed."""
+        count = size = 0
+        for path, nbytes, _ in self.entries():
+            try:
+                path.unlink()
+            except OSError:
+                continue
+            count += 1
+            size += nbytes
+        for stray in self.folder.glob("*.tmp") if self.folder.is_dir() else ():
+            with contextlib.suppress(OSError):
+                stray.unlink()
+        return count, size
+
+
+def _touch(path: Path) -> None:
+    """Mark an entry as just used (its mtime is the LRU clock; atime is often not kept)."""
+    with contextlib.suppress(OSError):
+        os.utime(path)

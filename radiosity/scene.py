@@ -255,7 +255,8 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
     paths = _emitter_paths(data, vertices, faces, kept, emission)
     notes += light_path_notes(paths, str(data.path))
     for note in notes:
-        warnings.warn(note, RadiosityWarning, stacklevel=2)
+        if MEASURED not in note:  # the package's own measured data is no surprise to warn about
+            warnings.warn(note, RadiosityWarning, stacklevel=2)
     return Scene(
         objects=data.objects,
         patch_quads=patches.quads,
@@ -316,12 +317,25 @@ def _units_notes(data, units: str | None) -> list[str]:
             "without this note"]
 
 
+# How a note on a bundled scene's non-planar face ends: the data are measurements, kept as published.
+MEASURED = "this is the measured geometry, kept as published"
+
+
+def _is_bundled(path) -> bool:
+    """Whether ``path`` is one of the scenes shipped with the package (``meshes/``)."""
+    try:
+        return Path(path).resolve().parent == bundled_scene(Path(path).stem).resolve().parent
+    except (SceneError, OSError):
+        return False
+
+
 def _face_notes(data, report) -> list[str]:
     """Notes on non-planar faces (split) and zero-area faces (dropped), a few named, the rest counted."""
     notes = []
+    measured = f"; {MEASURED}" if _is_bundled(data.path) else ""
     for face, deviation in report.nonplanar[:_NOTE_FACES]:
         notes.append(f"{data.path}:{data.face_line[face]}: face {face + 1} is not planar "
-                     f"(off by {deviation:.3g} m); split into triangles from its first vertex")
+                     f"(off by {deviation:.3g} m); split into triangles from its first vertex" + measured)
     if len(report.nonplanar) > _NOTE_FACES:
         notes.append(f"{data.path}: {len(report.nonplanar) - _NOTE_FACES} more non-planar face(s) split "
                      f"(largest deviation {max(d for _, d in report.nonplanar):.3g} m)")

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["to_polydata", "tone_map", "render", "scene_camera", "parse_camera", "auto_camera", "choose_camera",
-           "Camera"]
+           "Camera", "white_balanced"]
 
 # The Cornell box's published camera: position, focal point, up (metres), vertical view angle.
 CORNELL_CAMERA = ((0.278, 0.273, -0.8), (0.278, 0.273, 0.0), (0.0, 1.0, 0.0), 39.3)
@@ -30,11 +30,38 @@ def auto_exposure(solution) -> float:
     return float(0.85 / level) if level > 0 else 1.0
 
 
+def light_gains(solution) -> np.ndarray:
+    """Per-channel gains (3,) that make the emitters' mean colour grey at the same luminance.
+
+    The colour is the area-weighted mean emission of the emitting patches; each gain is that
+    colour's luminance over its channel, so a surface lit by the light alone looks neutral, as a
+    camera's white balance would make it. All ones when nothing emits or a channel is dark.
+    """
+    scene = solution.scene
+    emitting = scene.emission.any(axis=1)
+    if not emitting.any():
+        return np.ones(3)
+    colour = (scene.patch_area[emitting, None] * scene.emission[emitting]).sum(axis=0)
+    if (colour <= 0).any():
+        return np.ones(3)
+    return float(colour @ np.array([0.2126, 0.7152, 0.0722])) / colour
+
+
+def white_balanced(solution):
+    """(a copy of ``solution`` whose radiosity is scaled by :func:`light_gains`, the gains),
+    for pictures only: the physical values stay in the original."""
+    from dataclasses import replace
+
+    gains = light_gains(solution)
+    return replace(solution, radiosity=solution.radiosity * gains), gains
+
+
 def to_polydata(solution):
     """pyvista.PolyData of the solved patches with per-face and per-vertex radiosity.
 
-    Cell data: ``radiosity`` (n, 3) W/m^2, ``object`` (n,) index; point data: ``radiosity``
-    (area-weighted over the patches of the same object meeting at the vertex).
+    Cell data: ``radiosity`` (n, 3) W/m^2, ``object`` (n,) index into the field data
+    ``object_names``; point data: ``radiosity`` (area-weighted over the patches of the same
+    object meeting at the vertex).
     """
     import pyvista as pv
 
@@ -44,6 +71,7 @@ def to_polydata(solution):
     mesh.cell_data["radiosity"] = solution.radiosity
     mesh.cell_data["object"] = solution.scene.patch_object
     mesh.point_data["radiosity"] = vertex_b
+    mesh.field_data["object_names"] = np.array(solution.scene.objects, dtype=str)
     return mesh
 
 

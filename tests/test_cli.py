@@ -15,7 +15,7 @@ from radiosity.io.export import STAGING_PREFIX
 
 DATA = Path(__file__).parent / "data"
 ROOM = DATA / "room.obj"
-OUTPUTS = ["solution.ply", "solution.vtp", "summary.json"]
+OUTPUTS = ["solution.glb", "solution.ply", "solution.vtp", "summary.json"]
 
 
 def solve_args(out: Path, *extra: str, scene: Path | None = ROOM) -> list[str]:

@@ -1,10 +1,11 @@
-"""The ``radiosity`` command: solve, view, viewfactors, exchange. ``main(argv)`` returns the exit code.
+"""The ``radiosity`` command: solve, view, viewfactors, exchange, cache. ``main(argv)`` returns the exit code.
 
 Bad input (a ``RadiosityError``, ``ValueError`` or ``OSError``, a request too big for the
 machine, a bad command line) ends with exactly one line on stderr, ``radiosity: error: ...``,
 and exit status 2; ``--debug`` shows the traceback instead. Ctrl-C ends with one line and
 exit status 130 (SIGTERM: 143), also during the imports (``radiosity._startup``); outputs are written through a staging folder and the cache atomically, so
-neither is left half-written. Anything else is a bug and shows its traceback.
+neither is left half-written. Anything else is a bug: ``radiosity: internal error: ...`` with
+how to report it, exit status 1 (``--debug`` shows the traceback).
 
 Scene notes (``RadiosityWarning``: a non-planar face split, no emitter, ...) are printed by
 ``solve`` in its summary; other commands print them on stderr as ``radiosity: note: ...``.
@@ -21,12 +22,17 @@ from .._errors import MemoryBudgetError, RadiosityError, RadiosityWarning
 from .._startup import INTERRUPTED_LINE, PROG, exit_status, guard_imports
 
 with guard_imports():
-    from . import _exchange, _solve, _view, _viewfactors
+    from . import _cache, _exchange, _solve, _view, _viewfactors
 
 __all__ = ["main", "entry"]
 
 EXIT_OK = 0
+EXIT_INTERNAL = 1
 EXIT_BAD_INPUT = 2
+DESCRIPTION = ("Diffuse radiosity and exact view factors on polygon meshes. Exit status: 0 success, "
+               "1 internal error, 2 bad input, 130 interrupted (143 on SIGTERM).")
+REPORT_HINT = ("this is a bug in radiosity, not in your input; please report it with the command line, "
+               "the output of 'radiosity --version' and the traceback that --debug prints")
 
 _OUT_OF_MEMORY_HINT = ("use a coarser preset (--preset draft) or a larger --max-patch-size; "
                        "RADIOSITY_MEMORY_BUDGET (bytes) makes the check before allocation stricter")
@@ -44,13 +50,17 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog=PROG, description=__doc__.splitlines()[0])
-    parser.add_argument("--debug", action="store_true", help="show tracebacks for bad input")
+    from .. import __version__
+
+    parser = _Parser(prog=PROG, description=DESCRIPTION)
+    parser.add_argument("--version", action="version", version=f"{PROG} {__version__}",
+                        help="print the version and exit")
+    parser.add_argument("--debug", action="store_true", help="show tracebacks for bad input and internal errors")
     sub = parser.add_subparsers(dest="command", required=True)
-    for module in (_solve, _view, _viewfactors, _exchange):
+    for module in (_solve, _view, _viewfactors, _exchange, _cache):
         p = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP)
         p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
-                       help="show tracebacks for bad input")
+                       help="show tracebacks for bad input and internal errors")
         module.add_args(p)
         p.set_defaults(run=module.run, shows_notes=getattr(module, "SHOWS_NOTES", False))
     return parser
@@ -72,14 +82,21 @@ def _error(message: str) -> int:
     return EXIT_BAD_INPUT
 
 
+def _internal_error(exc: BaseException) -> int:
+    print(f"{PROG}: internal error: {type(exc).__name__}: {_one_line(exc)}", file=sys.stderr)
+    print(f"{PROG}: {REPORT_HINT}", file=sys.stderr)
+    return EXIT_INTERNAL
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Run the command line; returns the exit status (0 ok, 2 bad input, 130 Ctrl-C, 143 SIGTERM)."""
+    """Run the command line; returns the exit status (0 ok, 1 internal error, 2 bad input, 130 Ctrl-C,
+    143 SIGTERM)."""
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except UsageError as exc:
         return _error(str(exc))
-    except SystemExit as exc:  # --help
+    except SystemExit as exc:  # --help, --version
         return exc.code if isinstance(exc.code, int) else EXIT_OK
     caught: list[warnings.WarningMessage] = []
     try:
@@ -92,7 +109,9 @@ def main(argv: list[str] | None = None) -> int:
         # Ctrl-C inside a compiled kernel surfaces as "<function> returned a result with an
         # exception set", the KeyboardInterrupt as its cause.
         if not _is_interrupt(exc):
-            raise
+            if args.debug:
+                raise
+            return _internal_error(exc)
         return _interrupted(exc)
     except MemoryBudgetError as exc:
         if args.debug:
@@ -107,6 +126,10 @@ def main(argv: list[str] | None = None) -> int:
         if args.debug:
             raise
         return _error(_one_line(exc))
+    except Exception as exc:  # noqa: BLE001 - not bad input: a bug, reported as one
+        if args.debug:
+            raise
+        return _internal_error(exc)
     _report_warnings(caught, show_notes=not args.shows_notes)
     return code
 

@@ -29,8 +29,8 @@ def add_scene_args(parser: argparse.ArgumentParser, *, optional_scene: bool) -> 
     parser.add_argument("--max-patch-size", type=positive_metres, default=None, metavar="METRES",
                         help="longest patch edge, overriding the preset")
     parser.add_argument("--units", choices=tuple(UNITS), default=None,
-                        help="units of the OBJ coordinates (default: metres, with a warning if the "
-                             "scene is more than 50 m across)")
+                        help="units of the scene's coordinates, for the OBJ and the points file alike "
+                             "(default: metres, with a note if the scene is more than 50 m across)")
     parser.add_argument("--emission", choices=("radiance", "exitance"), default="radiance",
                         help="read Ke as radiance (E = pi Ke) or as exitance")
     parser.add_argument("--allow-clamp", action="store_true", help="clamp reflectances >= 1 instead of refusing")
@@ -61,6 +61,12 @@ def load(args):
     if args.units is not None:
         options["units"] = args.units
     return load_scene(path, emission=args.emission, **options)
+
+
+def unit_scale(args) -> float:
+    """Metres per unit of the scene's coordinates (``--units``); every input in scene
+    coordinates (the OBJ, the points file) is scaled by it."""
+    return UNITS[args.units or "m"]
 
 
 def overrides(args) -> dict:

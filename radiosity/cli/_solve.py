@@ -9,9 +9,14 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import SceneError
-from ..io.export import atomic_path, staged_outputs, write_ply, write_png, write_summary, write_vtp
+from .._kernels import FIRST_RUN_MESSAGE, compile_timer, kernels_on_disk, warm_up
+from ..io.export import atomic_path, staged_outputs, write_glb, write_ply, write_png, write_summary, write_vtp
+from ..io.html import write_html
 from ..solve import solve
-from ._common import add_camera_arg, add_scene_args, load, overrides
+from ..system import DIRECT_MAX
+from ..viz import auto_exposure, white_balanced
+from ._common import add_camera_arg, add_scene_args, load, overrides, unit_scale
+from ._record import run_record
 
 NAME = "solve"
 HELP = "solve a scene's radiosity and write a picture, meshes and summary.json"
@@ -23,20 +28,32 @@ def add_args(parser) -> None:
     parser.add_argument("-o", "--output", type=Path, default=Path("radiosity-out"), metavar="OUTDIR",
                         help="output folder (default: %(default)s)")
     parser.add_argument("--solver", default="auto",
-                        choices=("auto", "direct", "bicgstab", "gmres", "jacobi", "gauss-seidel", "progressive"))
+                        choices=("auto", "direct", "bicgstab", "gmres", "jacobi", "gauss-seidel", "progressive"),
+                        help="linear solver for (I - rho F) B = E: auto takes a direct sparse LU up to "
+                             f"{DIRECT_MAX:,} patches and bicgstab beyond; jacobi, gauss-seidel and "
+                             "progressive (shooting) are there to compare (default: %(default)s)")
     parser.add_argument("--no-picture", action="store_true", help="skip the PNG")
     add_camera_arg(parser)
+    parser.add_argument("--white-balance", choices=("none", "light"), default="none",
+                        help="picture.png only: 'none' shows the light's own colour (the bundled box's measured "
+                             "light is yellowish, Ke 17 12 4), 'light' scales the channels so the light looks "
+                             "white, as a camera would (default: %(default)s; the files keep physical values)")
+    parser.add_argument("--html", action="store_true",
+                        help="also write solution.html, a self-contained interactive page (orbit, values on "
+                             "hover, colour bar) that opens offline in any browser")
     parser.add_argument("--points", type=Path, default=None, metavar="FILE",
-                        help="text file of receiver points 'x y z nx ny nz' per line; writes irradiance.csv")
+                        help="text file of receiver points 'x y z nx ny nz' per line, in the scene's "
+                             "--units; writes irradiance.csv")
 
 
-def format_summary(solution, load_seconds: float) -> str:
+def format_summary(solution, load_seconds: float, compile_seconds: float = 0.0) -> str:
     s = solution.summary()
     lines = [f"scene      {s['source']}",
              f"patches    {s['patches']}   view factors {s['nonzeros']:,}   rays {s['rays'] or 0:,}"
              + ("   (form factors from cache)" if s["cache_hit"] else "")]
     times = {"load": load_seconds, **s["timings_s"]}
-    lines.append("time (s)   " + "   ".join(f"{k} {v:.2f}" for k, v in times.items()))
+    lines.append("time (s)   " + "   ".join(f"{k} {v:.2f}" for k, v in times.items())
+                 + (f"   (and compiling kernels {compile_seconds:.1f}, first run only)" if compile_seconds >= 0.5 else ""))
     sol = s["solver"]
     fallback = sorted({f for f in sol.get("fallback", []) if f})
     lines.append(f"solver     {sol['method']}, iterations {sol['iterations']}, residual {max(sol['residual']):.1e}"
@@ -95,34 +112,70 @@ def read_points(path: Path) -> np.ndarray:
     return np.asarray(rows)
 
 
+def _interactive() -> bool:
+    return sys.stderr.isatty()
+
+
+def _write_picture(solution, path: Path, exposure: float, white_balance: str, camera=None) -> dict | None:
+    """picture.png, white-balanced to the light if asked; returns what the balance did, or None."""
+    if white_balance == "none":
+        write_png(solution, path, exposure=exposure, camera=camera)
+        return None
+    shown, gains = white_balanced(solution)
+    picture_exposure = auto_exposure(shown)
+    write_png(shown, path, exposure=picture_exposure, camera=camera)
+    return {"mode": white_balance, "gains_rgb": [float(g) for g in gains], "picture_exposure": picture_exposure,
+            "applies_to": "picture.png only"}
+
+
+# Every file a solve may write: those of an earlier run that this run does not write are removed.
+OUTPUT_NAMES = ("solution.vtp", "solution.ply", "solution.glb", "solution.html", "picture.png", "irradiance.csv",
+                "summary.json")
+
+
 def run(args) -> int:
     t0 = time.perf_counter()
     scene = load(args)
     points = read_points(args.points) if args.points else None
+    to_metres = unit_scale(args)  # the points are in the scene's coordinates, like the OBJ
     load_seconds = time.perf_counter() - t0
     out = args.output
-    written = ["solution.vtp", "solution.ply"] + ([] if args.no_picture else ["picture.png"])
+    written = ["solution.vtp", "solution.ply", "solution.glb"] + (["solution.html"] if args.html else [])
+    written += [] if args.no_picture else ["picture.png"]
     written += (["irradiance.csv"] if points is not None else []) + ["summary.json"]
     # Everything goes to a staging folder first and is moved into OUTDIR only when all of it is
     # written: a failed or interrupted run leaves an earlier run's outputs as they were.
-    with staged_outputs(out) as stage:
+    with staged_outputs(out, owned=OUTPUT_NAMES) as stage, compile_timer() as compiled:
+        if not kernels_on_disk():
+            if _interactive():  # like the progress bar: for a person at a terminal, not for logs
+                print(FIRST_RUN_MESSAGE, file=sys.stderr, flush=True)
+            warm_up()
         solution = solve(scene, preset=args.preset, solver=args.solver, progress=sys.stderr.isatty(),
                          **overrides(args))
-        h = solution.irradiance(points[:, :3], points[:, 3:]) if points is not None else None
+        h = solution.irradiance(points[:, :3] * to_metres, points[:, 3:]) if points is not None else None
         summary = solution.summary()
         write_vtp(solution, stage / "solution.vtp")
         write_ply(solution, stage / "solution.ply")
+        exposure = auto_exposure(solution)
+        write_glb(solution, stage / "solution.glb", exposure=exposure)
+        if args.html:
+            write_html(solution, stage / "solution.html", exposure=exposure)
+        balance = None
         if not args.no_picture:
             from ..viz import choose_camera
 
             camera = choose_camera(solution, args.camera)
             summary["camera"] = camera.as_dict() if camera is not None else {"how": "outside (isometric view)"}
-            summary["exposure"] = write_png(solution, stage / "picture.png", camera=camera)
+            balance = _write_picture(solution, stage / "picture.png", exposure, args.white_balance, camera)
         if h is not None:
             with atomic_path(stage / "irradiance.csv") as tmp:
                 np.savetxt(tmp, np.column_stack([points, h]), delimiter=",", fmt="%.9g",
-                           header="x,y,z,nx,ny,nz,H_r,H_g,H_b (W/m^2)", comments="")
+                           header=f"x,y,z ({args.units or 'm'}),nx,ny,nz,H_r,H_g,H_b (W/m^2)", comments="")
+        summary.update(run_record(args, solution, exposure=exposure, load_seconds=load_seconds,
+                                  compile_seconds=compiled.seconds, outputs=written))
+        if balance is not None:
+            summary["white_balance"] = balance
         write_summary(summary, stage / "summary.json")
-    print(format_summary(solution, load_seconds))
+    print(format_summary(solution, load_seconds, compiled.seconds))
     print(f"wrote      {out}/: {' '.join(written)}")
     return 0

@@ -1,10 +1,17 @@
-"""``radiosity view``: open the interactive pyvista viewer on a solved result."""
+"""``radiosity view``: open the interactive pyvista viewer on a solved result.
+
+Without a display (no ``DISPLAY`` or ``WAYLAND_DISPLAY`` on Linux) no window can open: the
+command refuses with one line and exit status 2 instead of VTK's log lines, and names the
+options that work off-screen (``--screenshot``).
+"""
 
 from __future__ import annotations
 
+import os
+import sys
 from pathlib import Path
 
-from .._errors import SceneError
+from .._errors import RadiosityError, SceneError
 from ._common import add_camera_arg
 
 NAME = "view"
@@ -13,8 +20,18 @@ HELP = "open the interactive viewer on a solved result (OUTDIR or its solution.v
 
 def add_args(parser) -> None:
     parser.add_argument("result", type=Path, help="output folder of 'radiosity solve' or a .vtp file")
-    parser.add_argument("--screenshot", type=Path, default=None, help="save a PNG instead of opening a window")
-    add_camera_arg(parser)
+    parser.add_argument("--screenshot", type=Path, default=None, metavar="OUT.png",
+                        help="render off-screen and save a PNG instead of opening a window (works without a display)")
+    parser.add_argument("--html", type=Path, default=None, metavar="OUT.html",
+                        help="write a self-contained interactive page (opens offline in any browser) instead of "
+                             "opening a window")
+
+
+def has_display() -> bool:
+    """Whether a window can open: on Linux and the BSDs an X11 or Wayland display must be set."""
+    if sys.platform.startswith(("linux", "freebsd", "openbsd", "netbsd")):
+        return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    return True
 
 
 def read_result(path: Path):
@@ -77,19 +94,50 @@ def result_camera(mesh, path: Path, camera: str | None):
     return auto_camera(np.asarray(triangles.points, dtype=float)[faces])
 
 
+def _summary_beside(path: Path) -> dict:
+    """The ``summary.json`` written with a result (for its exposure and scene), or {}."""
+    import json
+
+    try:
+        record = json.loads((path.parent / "summary.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return record if isinstance(record, dict) else {}
+
+
+def _write_page(mesh, path: Path, target: Path) -> int:
+    import numpy as np
+
+    from ..io.html import page_data_from_result, write_page
+
+    record = _summary_beside(path)
+    radiance = np.asarray(mesh.point_data["radiosity"]) / np.pi
+    exposure = record.get("exposure") or 0.85 / (np.percentile(radiance.max(axis=1), 90) or 1.0)
+    write_page(page_data_from_result(mesh, record, exposure=float(exposure)), target)
+    print(f"wrote {target}")
+    return 0
+
+
 def run(args) -> int:
     import numpy as np
     import pyvista as pv
 
     from ..viz import _quiet_vtk, apply_camera, tone_map
 
-    _quiet_vtk()
     path = args.result / "solution.vtp" if args.result.is_dir() else args.result
     mesh = read_result(path)
+    if args.html is not None:
+        return _write_page(mesh, path, args.html)
+    if args.screenshot is None and not has_display():
+        raise RadiosityError("no display to open a window on (DISPLAY is not set); use --screenshot OUT.png "
+                             "to render off-screen, or --html OUT.html for a page")
+    _quiet_vtk()
+    record = _summary_beside(path)
     radiance = np.asarray(mesh.point_data["radiosity"]) / np.pi
-    level = np.percentile(radiance.max(axis=1), 90) or 1.0
-    mesh.point_data["rgb"] = tone_map(radiance, 0.85 / level)
+    exposure = record.get("exposure") or 0.85 / (np.percentile(radiance.max(axis=1), 90) or 1.0)
+    mesh.point_data["rgb"] = tone_map(radiance, exposure)  # the picture's tone map, when known
     plotter = pv.Plotter(off_screen=args.screenshot is not None)
+    plotter.set_background("black")
     plotter.add_mesh(mesh, scalars="rgb", rgb=True, lighting=False)
     apply_camera(plotter, result_camera(mesh, path, args.camera))
     if args.screenshot is not None:

@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["atomic_path", "atomic_paths", "staged_outputs", "write_summary", "write_ply", "write_vtp", "write_png",
-           "write_view_factors", "view_factor_arrays", "write_vf"]
+__all__ = ["atomic_path", "atomic_paths", "staged_outputs", "triangles", "write_summary", "write_ply",
+           "write_vtp", "write_png", "write_glb", "write_view_factors", "view_factor_arrays", "write_vf"]
 
 
 @contextlib.contextmanager
@@ -74,14 +74,17 @@ STAGING_PREFIX = ".radiosity-partial-"
 
 
 @contextlib.contextmanager
-def staged_outputs(folder: str | Path):
+def staged_outputs(folder: str | Path, owned: tuple[str, ...] = ()):
     """Yield a hidden staging folder inside ``folder``; move its files into ``folder`` on success.
 
     Every output of a run is written into the staging folder first. Only when the whole block
     succeeds are the files renamed into ``folder`` (each rename is atomic), so a run that fails
     or is interrupted leaves the outputs of an earlier run untouched, not a mix of old and new.
     The folder is created (and checked for writing) on entry, before any long computation; if
-    it was created here and the run fails, it is removed again.
+    it was created here and the run fails, it is removed again. Files named in ``owned`` (what
+    this kind of run may write) that this run did not write are removed on success, so an
+    earlier run's ``picture.png`` or ``irradiance.csv`` does not pass for this run's; other
+    files in ``folder`` are left alone.
 
     Raises
     ------
@@ -105,9 +108,14 @@ def staged_outputs(folder: str | Path):
     ok = False
     try:
         yield stage
+        written = set()
         for item in sorted(stage.iterdir()):
             if not item.name.startswith("."):
                 os.replace(item, folder / item.name)
+                written.add(item.name)
+        for name in set(owned) - written:
+            with contextlib.suppress(FileNotFoundError, IsADirectoryError):
+                (folder / name).unlink()
         ok = True
     finally:
         shutil.rmtree(stage, ignore_errors=True)
@@ -121,35 +129,55 @@ def write_summary(summary: dict, path: str | Path) -> None:
         tmp.write_text(json.dumps(summary, indent=2) + "\n")
 
 
+def triangles(solution) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The solved mesh as triangles: vertices (v, 3), triangles (t, 3) and each one's patch (t,).
+
+    Each patch outline of ``Solution.vertex_mesh`` (which carries its neighbours' T-junction
+    vertices) is fanned from its first corner; triangles of collinear corners (zero area) are
+    dropped, so every triangle is proper and every patch keeps at least one.
+    """
+    vertices, faces, _ = solution.vertex_mesh
+    counts = np.array([len(f) - 2 for f in faces])
+    tris = np.concatenate([np.column_stack([np.full(len(f) - 2, f[0]), f[1:-1], f[2:]]) for f in faces])
+    patch = np.repeat(np.arange(len(faces)), counts)
+    a, b, c = (vertices[tris[:, k]] for k in range(3))
+    twice_area = np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    keep = twice_area > 1e-12 * max(solution.scene.scale, 1e-300) ** 2
+    return vertices, tris[keep], patch[keep]
+
+
 def write_ply(solution, path: str | Path) -> None:
-    """Binary PLY: vertices with radiosity (float) and sRGB colour; faces with radiosity."""
+    """ASCII PLY of triangles, readable by trimesh, meshio, pyvista/VTK and MeshLab.
+
+    Vertex properties: ``x y z``, float ``radiosity_r/g/b`` (W/m^2, area-weighted over the
+    patches of one object meeting there) and 8-bit sRGB ``red green blue`` (the picture's tone
+    map). Face properties: float ``radiosity_r/g/b`` (the patch's value), ``patch`` (row of
+    ``Solution.radiosity``) and ``object`` (index into the ``comment object`` names).
+    Faces are triangles because several readers refuse mixed polygon sizes.
+    """
     from ..viz import auto_exposure, tone_map
 
-    vertices, faces, vertex_b = solution.vertex_mesh
+    vertices, tris, patch = triangles(solution)
+    vertex_b = solution.vertex_mesh[2]
     colour = tone_map(vertex_b / np.pi, auto_exposure(solution))
-    vdtype = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("radiosity_r", "<f4"), ("radiosity_g", "<f4"),
-                       ("radiosity_b", "<f4"), ("red", "u1"), ("green", "u1"), ("blue", "u1")])
-    vrec = np.empty(len(vertices), dtype=vdtype)
-    for name, col in zip(("x", "y", "z"), vertices.T):
-        vrec[name] = col
-    for k, c in enumerate("rgb"):
-        vrec[f"radiosity_{c}"] = vertex_b[:, k]
-    for name, col in zip(("red", "green", "blue"), colour.T):
-        vrec[name] = col
-    header = ["ply", "format binary_little_endian 1.0", "comment radiosity W/m^2 per vertex and per face",
-              f"element vertex {len(vertices)}"]
+    header = ["ply", "format ascii 1.0", "comment radiosity W/m^2 per vertex and per face",
+              "comment red green blue: sRGB of radiance B/pi times the picture's exposure"]
+    header += [f"comment object {k} {name}" for k, name in enumerate(solution.scene.objects)]
+    header += [f"element vertex {len(vertices)}"]
     header += [f"property float {n}" for n in ("x", "y", "z", "radiosity_r", "radiosity_g", "radiosity_b")]
     header += ["property uchar red", "property uchar green", "property uchar blue",
-               f"element face {len(faces)}", "property list uchar int vertex_indices",
+               f"element face {len(tris)}", "property list uchar int vertex_indices",
                "property float radiosity_r", "property float radiosity_g", "property float radiosity_b",
-               "end_header"]
-    chunks = []
-    for f, b in zip(faces, solution.radiosity.astype("<f4")):
-        chunks.append(np.uint8(len(f)).tobytes() + np.asarray(f, "<i4").tobytes() + b.tobytes())
-    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-        fh.write(("\n".join(header) + "\n").encode())
-        fh.write(vrec.tobytes())
-        fh.write(b"".join(chunks))
+               "property int patch", "property int object", "end_header"]
+    # ASCII: meshio's binary reader takes face properties column by column, which misreads any
+    # binary PLY with more than the vertex list per face; every reader agrees on ASCII.
+    vertex_rows = np.column_stack([vertices, vertex_b, colour])
+    face_rows = np.column_stack([np.full(len(tris), 3), tris, solution.radiosity[patch], patch,
+                                 solution.scene.patch_object[patch]])
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="ascii") as fh:
+        fh.write("\n".join(header) + "\n")
+        np.savetxt(fh, vertex_rows, fmt=["%.9g"] * 6 + ["%d"] * 3)
+        np.savetxt(fh, face_rows, fmt=["%d"] * 4 + ["%.9g"] * 3 + ["%d"] * 2)
 
 
 def write_vtp(solution, path: str | Path) -> None:
@@ -318,3 +346,54 @@ def read_vf(path: str | Path) -> dict:
     if len(values) != n * (n + 2):
         raise ValueError(f"{path}: expected {n * (n + 2)} numbers after the header, got {len(values)}")
     return {"header": header, "area": values[:n], "F": values[n:n + n * n].reshape(n, n), "emissivity": values[-n:]}
+
+
+def linear_colours(radiance: np.ndarray, exposure: float) -> np.ndarray:
+    """Radiance (..., 3) times exposure, clipped to [0, 1]: linear display values (glTF's COLOR_0)."""
+    return np.clip(np.asarray(radiance) * exposure, 0.0, 1.0)
+
+
+def _unlit(tree: dict) -> None:
+    """glTF post-processing: every primitive gets one unlit white material (KHR_materials_unlit),
+    so viewers show the baked radiosity as it is instead of lighting it again."""
+    tree["materials"] = [{"name": "radiosity (baked, unlit)",
+                          "pbrMetallicRoughness": {"baseColorFactor": [1.0, 1.0, 1.0, 1.0],
+                                                   "metallicFactor": 0.0, "roughnessFactor": 1.0},
+                          "extensions": {"KHR_materials_unlit": {}}}]
+    for mesh in tree.get("meshes", []):
+        for primitive in mesh["primitives"]:
+            primitive["material"] = 0
+    used = set(tree.get("extensionsUsed", [])) | {"KHR_materials_unlit"}
+    tree["extensionsUsed"] = sorted(used)
+
+
+def write_glb(solution, path: str | Path, *, exposure: float | None = None) -> None:
+    """glTF 2.0 binary (.glb): one node per object, radiosity baked into vertex colours.
+
+    ``COLOR_0`` holds the radiance B/pi times ``exposure`` (the picture's, by default), clipped
+    to [0, 1], as linear values (glTF's convention: viewers encode to sRGB on display). The
+    material is unlit (``KHR_materials_unlit``). Each vertex also carries the float radiosity
+    (W/m^2) as the application attribute ``_RADIOSITY``. Written with trimesh's exporter.
+    """
+    import trimesh
+
+    from ..viz import auto_exposure
+
+    exposure = auto_exposure(solution) if exposure is None else exposure
+    vertices, tris, patch = triangles(solution)
+    vertex_b = solution.vertex_mesh[2]
+    colour = np.round(255 * linear_colours(vertex_b / np.pi, exposure)).astype(np.uint8)
+    rgba = np.column_stack([colour, np.full(len(colour), 255, np.uint8)])
+    scene = trimesh.Scene()
+    tri_object = solution.scene.patch_object[patch]
+    for index, name in enumerate(solution.scene.objects):
+        own = tris[tri_object == index]
+        if not len(own):
+            continue
+        used, local = np.unique(own, return_inverse=True)
+        mesh = trimesh.Trimesh(vertices[used], local.reshape(-1, 3), vertex_colors=rgba[used], process=False)
+        mesh.vertex_attributes["_RADIOSITY"] = vertex_b[used].astype(np.float32)
+        scene.add_geometry(mesh, geom_name=name, node_name=name)
+    data = trimesh.exchange.gltf.export_glb(scene, include_normals=False, tree_postprocessor=_unlit)
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
