@@ -25,6 +25,7 @@ def add_args(parser) -> None:
     parser.add_argument("--html", type=Path, default=None, metavar="OUT.html",
                         help="write a self-contained interactive page (opens offline in any browser) instead of "
                              "opening a window")
+    add_camera_arg(parser)
 
 
 def has_display() -> bool:
