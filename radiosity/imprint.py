@@ -27,11 +27,13 @@ the union is convex, removing the longest diagonals first.
 
 from __future__ import annotations
 
+import warnings
 from collections import defaultdict
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._errors import RadiosityWarning
 from .patches import FaceReport, Patches, _newell, planar_parts, subdivide_faces
 
 __all__ = ["Contact", "Imprinted", "imprint_faces", "subdivide_imprinted", "CONTACT_REL"]
@@ -70,6 +72,14 @@ SNAP_REL = 1e-12
 # A merged quad is kept only if each corner turns by at least this much (sine of the angle,
 # times both edge lengths): avoids quads that are triangles with a flat corner.
 CONVEX_TURN_REL = 1e-6
+
+
+def _geos_error() -> type[Exception]:
+    """shapely's GEOS error class, imported only when an exception is being matched (shapely
+    stays out of ``import radiosity``)."""
+    from shapely.errors import GEOSException
+
+    return GEOSException
 
 
 @dataclass(frozen=True)
@@ -385,8 +395,13 @@ def imprint_faces(vertices: np.ndarray, faces: list[np.ndarray], face_object: np
         part_of_point = np.repeat(np.arange(len(parts)), [len(p.poly) for p in parts])
     by_face: dict[int, list[tuple[_Part, list]]] = defaultdict(list)
     contacts: list[Contact] = []
+    failed: set[int] = set()
     for part in parts:
-        regions = _regions_of(part, parts, part_points, part_of_point, scale)
+        try:
+            regions = _regions_of(part, parts, part_points, part_of_point, scale)
+        except _geos_error():  # a degenerate contact GEOS cannot overlay: leave the face uncut
+            regions = []
+            failed.add(part.face)
         by_face[part.face].append((part, regions))
         for region, hidden, kind, obj in regions:
             for poly in _polygons(region):
@@ -416,7 +431,18 @@ def imprint_faces(vertices: np.ndarray, faces: list[np.ndarray], face_object: np
         if deviations[index]:
             nonplanar.append((index, deviations[index]))
         for part, regions in entries:
-            _emit_part(part, regions, emit, CONTACT_REL * scale)
+            made: list[tuple] = []
+            try:
+                _emit_part(part, regions, lambda *piece: made.append(piece), CONTACT_REL * scale)
+            except _geos_error():
+                made = [(part.poly, part.face, False)]
+                failed.add(part.face)
+            for piece in made:
+                emit(*piece)
+    if failed:
+        faces_text = ", ".join(str(f + 1) for f in sorted(failed)[:5]) + (" ..." if len(failed) > 5 else "")
+        warnings.warn(f"imprint: GEOS could not cut {len(failed)} face(s) along their contacts ({faces_text}); "
+                      "left uncut", RadiosityWarning, stacklevel=2)
     verts = np.concatenate(out_vertices) if out_vertices else np.zeros((0, 3))
     return Imprinted(verts, pieces, np.asarray(piece_face, np.int64), np.asarray(piece_hidden, bool),
                      contacts, nonplanar)

@@ -150,3 +150,24 @@ def test_random_boxes_near_corners(spec, roll, corner, gap):
     spec = dict(spec, cx=sx * (0.99 - gap - half[0]), cz=sz * (0.99 - gap - half[1]))
     vertices, faces, owner = _scene([spec], roll)
     _assert_tiles_floor(vertices, faces, owner)
+
+
+def test_geos_failure_leaves_the_face_uncut(monkeypatch):
+    """A TopologyException while cutting one face leaves it whole, with a note; area kept."""
+    import warnings
+
+    import radiosity
+    from radiosity import imprint
+
+    def broken(*args, **kwargs):
+        raise shapely.errors.GEOSException("TopologyException: side location conflict at 0 0")
+
+    monkeypatch.setattr(imprint, "_emit_part", broken)
+    vertices, faces, owner = _scene([dict(NEAR_CORNER)], 1)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        patches, _, cut = subdivide_imprinted(vertices, faces, owner, 0.3)
+    assert any(issubclass(w.category, radiosity.RadiosityWarning) and "left uncut" in str(w.message) for w in caught)
+    quads = patches.quads[patches.patch_face == 0]
+    assert sum(np.linalg.norm(_newell(q)) for q in quads) == pytest.approx(FLOOR_AREA, rel=1e-12)
+    assert not patches.patch_hidden.any()
