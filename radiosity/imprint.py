@@ -271,7 +271,10 @@ def _is_covered(region, receiver: _Part, parts: list[_Part], obj: int, tol: floa
     for part in parts:
         if part.obj != obj or float(part.normal @ receiver.normal) <= 1e-9:
             continue
-        if ((part.poly - receiver.origin) @ receiver.normal).min() < -tol:
+        height = (part.poly - receiver.origin) @ receiver.normal
+        # behind the receiver, or in its plane (an overlap, decided as one: a ceiling just above
+        # a lamp mounted under it is not a block's top over the lamp)
+        if height.min() < -tol or height.max() <= tol:
             continue
         covers.append(_polygon(receiver.to_2d(part.poly)))
     if not covers:

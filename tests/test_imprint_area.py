@@ -171,3 +171,32 @@ def test_geos_failure_leaves_the_face_uncut(monkeypatch):
     quads = patches.quads[patches.patch_face == 0]
     assert sum(np.linalg.norm(_newell(q)) for q in quads) == pytest.approx(FLOOR_AREA, rel=1e-12)
     assert not patches.patch_hidden.any()
+
+
+def test_lamp_under_the_ceiling_of_a_one_object_room_stays_lit():
+    """A room exported as one mesh (walls and ceiling together), a lamp 0.5 mm under the ceiling.
+
+    The walls' top edges lie within the contact tolerance of the lamp's plane and close into a
+    loop around it; the ceiling, just behind the lamp, was taken for a block's top covering
+    that footprint, and the whole lamp was hidden: a closed room lit by nothing (100% escaped).
+    """
+    room = [np.array(f, float) for f in (
+        [[0, 0, 0], [0, 0, 1], [1, 0, 1], [1, 0, 0]],  # floor, up
+        [[0, 1, 0], [1, 1, 0], [1, 1, 1], [0, 1, 1]],  # ceiling, down
+        [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]],  # z = 0 wall, +z
+        [[0, 0, 1], [0, 1, 1], [1, 1, 1], [1, 0, 1]],  # z = 1 wall, -z
+        [[0, 0, 0], [0, 1, 0], [0, 1, 1], [0, 0, 1]],  # x = 0 wall, +x
+        [[1, 0, 0], [1, 0, 1], [1, 1, 1], [1, 1, 0]])]  # x = 1 wall, -x
+    lamp = np.array([[0.4, 0.9995, 0.4], [0.6, 0.9995, 0.4], [0.6, 0.9995, 0.6], [0.4, 0.9995, 0.6]])
+    centre = np.array([0.5, 0.5, 0.5])
+    for f in room:
+        assert _newell(f) @ (centre - f.mean(axis=0)) > 0
+    assert _newell(lamp) @ UP < 0
+    vertices = np.concatenate(room + [lamp])
+    faces = [np.arange(4) + 4 * k for k in range(7)]
+    owner = np.array([0] * 6 + [1])
+    patches, _, cut = subdivide_imprinted(vertices, faces, owner, None)
+    assert not patches.patch_hidden[patches.patch_face == 6].any(), "the lamp must not be hidden"
+    ceiling = patches.patch_face == 1
+    hidden_ceiling = sum(np.linalg.norm(_newell(q)) for q in patches.quads[ceiling & patches.patch_hidden])
+    assert hidden_ceiling == pytest.approx(0.04, rel=1e-9)  # the ceiling behind the lamp
