@@ -27,11 +27,13 @@ the union is convex, removing the longest diagonals first.
 
 from __future__ import annotations
 
+import warnings
 from collections import defaultdict
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._errors import RadiosityWarning
 from .patches import FaceReport, Patches, _newell, planar_parts, subdivide_faces
 
 __all__ = ["Contact", "Imprinted", "imprint_faces", "subdivide_imprinted", "CONTACT_REL"]
@@ -55,9 +57,29 @@ COVER_AREA_REL = 1e-6
 # up to it, along the full lines through their edges (better-shaped pieces, O(lines^2) of them).
 MAX_EXTENSION_LINES = 24
 
+# Triangles that miss a polygon's area by more than this fraction of it are not a tiling
+# (earcut skips what it cannot cut, such as a hole touching the outer ring): triangulate again.
+TILE_AREA_REL = 1e-9
+
+# Earcut triangles smaller than this fraction of their polygon are flat (collinear corners
+# left by the overlays): their winding is round-off, so they are dropped.
+FLAT_TRIANGLE_REL = 1e-12
+
+# Grid (relative to the face's size) of the snap-rounded overlays used when round-off broke the
+# partition of a face into cells: far below any length that matters, far above round-off.
+SNAP_REL = 1e-12
+
 # A merged quad is kept only if each corner turns by at least this much (sine of the angle,
 # times both edge lengths): avoids quads that are triangles with a flat corner.
 CONVEX_TURN_REL = 1e-6
+
+
+def _geos_error() -> type[Exception]:
+    """shapely's GEOS error class, imported only when an exception is being matched (shapely
+    stays out of ``import radiosity``)."""
+    from shapely.errors import GEOSException
+
+    return GEOSException
 
 
 @dataclass(frozen=True)
@@ -249,7 +271,10 @@ def _is_covered(region, receiver: _Part, parts: list[_Part], obj: int, tol: floa
     for part in parts:
         if part.obj != obj or float(part.normal @ receiver.normal) <= 1e-9:
             continue
-        if ((part.poly - receiver.origin) @ receiver.normal).min() < -tol:
+        height = (part.poly - receiver.origin) @ receiver.normal
+        # behind the receiver, or in its plane (an overlap, decided as one: a ceiling just above
+        # a lamp mounted under it is not a block's top over the lamp)
+        if height.min() < -tol or height.max() <= tol:
             continue
         covers.append(_polygon(receiver.to_2d(part.poly)))
     if not covers:
@@ -289,7 +314,10 @@ def convex_pieces(polygon) -> list[np.ndarray]:
     tris = np.asarray(mapbox_earcut.triangulate_float64(points, ends), dtype=np.int64).reshape(-1, 3)
     a, b, c = points[tris[:, 0]], points[tris[:, 1]], points[tris[:, 2]]
     signed = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
-    tris = np.where((signed < 0)[:, None], tris[:, ::-1], tris)[signed != 0]
+    if abs(0.5 * np.abs(signed).sum() - polygon.area) > TILE_AREA_REL * polygon.area:
+        return _delaunay_pieces(polygon)  # earcut gave up on part of it (a hole touching the rim)
+    keep = 0.5 * np.abs(signed) > FLAT_TRIANGLE_REL * polygon.area  # no round-off needles
+    tris = np.where((signed < 0)[:, None], tris[:, ::-1], tris)[keep]
     owner: dict[tuple[int, int], int] = {}
     for t, tri in enumerate(tris):
         for k in range(3):
@@ -312,6 +340,20 @@ def convex_pieces(polygon) -> list[np.ndarray]:
             used[t] = used[s] = True
             out.append(quad)
     out.extend(points[tri] for tri, u in zip(tris, used) if not u)
+    return out
+
+
+def _delaunay_pieces(polygon) -> list[np.ndarray]:
+    """Counter-clockwise triangles of a polygon by constrained Delaunay (earcut's fallback)."""
+    import shapely
+
+    out = []
+    for tri in _polygons(shapely.constrained_delaunay_triangles(polygon)):
+        xy = np.asarray(tri.exterior.coords)[:-1]
+        a, b, c = xy
+        signed = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+        if 0.5 * abs(signed) > FLAT_TRIANGLE_REL * polygon.area:
+            out.append(xy if signed > 0 else xy[::-1].copy())
     return out
 
 
@@ -356,8 +398,13 @@ def imprint_faces(vertices: np.ndarray, faces: list[np.ndarray], face_object: np
         part_of_point = np.repeat(np.arange(len(parts)), [len(p.poly) for p in parts])
     by_face: dict[int, list[tuple[_Part, list]]] = defaultdict(list)
     contacts: list[Contact] = []
+    failed: set[int] = set()
     for part in parts:
-        regions = _regions_of(part, parts, part_points, part_of_point, scale)
+        try:
+            regions = _regions_of(part, parts, part_points, part_of_point, scale)
+        except _geos_error():  # a degenerate contact GEOS cannot overlay: leave the face uncut
+            regions = []
+            failed.add(part.face)
         by_face[part.face].append((part, regions))
         for region, hidden, kind, obj in regions:
             for poly in _polygons(region):
@@ -387,20 +434,37 @@ def imprint_faces(vertices: np.ndarray, faces: list[np.ndarray], face_object: np
         if deviations[index]:
             nonplanar.append((index, deviations[index]))
         for part, regions in entries:
-            _emit_part(part, regions, emit, CONTACT_REL * scale)
+            made: list[tuple] = []
+            try:
+                _emit_part(part, regions, lambda *piece: made.append(piece), CONTACT_REL * scale)
+            except _geos_error():
+                made = [(part.poly, part.face, False)]
+                failed.add(part.face)
+            for piece in made:
+                emit(*piece)
+    if failed:
+        faces_text = ", ".join(str(f + 1) for f in sorted(failed)[:5]) + (" ..." if len(failed) > 5 else "")
+        warnings.warn(f"imprint: GEOS could not cut {len(failed)} face(s) along their contacts ({faces_text}); "
+                      "left uncut", RadiosityWarning, stacklevel=2)
     verts = np.concatenate(out_vertices) if out_vertices else np.zeros((0, 3))
     return Imprinted(verts, pieces, np.asarray(piece_face, np.int64), np.asarray(piece_hidden, bool),
                      contacts, nonplanar)
 
 
 def _extension_lines(regions, shape, tol: float) -> list:
-    """Lines through every edge of the contact regions, clipped to the receiving shape."""
+    """Lines through every edge of the contact regions, reaching past the receiving shape.
+
+    The lines are not clipped to the shape: a clipped line's end is computed on the boundary
+    only to round-off, and an end a hair inside it is a dangle that ``polygonize`` drops, which
+    merged the cells on either side of it (a contact's cell then took its neighbours with it
+    when hidden cells were removed). Lines crossing the boundary are always noded with it.
+    """
     import shapely
 
     seen: list[tuple[float, float, float]] = []
     lines = []
     x0, y0, x1, y1 = shape.bounds
-    reach = 2.0 * float(np.hypot(x1 - x0, y1 - y0))
+    reach = 2.0 * float(np.hypot(x1 - x0, y1 - y0)) + 1.0 * tol
     for region in regions:
         for poly in _polygons(region):
             for ring in [poly.exterior, *poly.interiors]:
@@ -420,8 +484,8 @@ def _extension_lines(regions, shape, tol: float) -> list:
                            for k in seen):
                         continue
                     seen.append(key)
-                    line = shapely.LineString([p - reach * d, q + reach * d]).intersection(shape)
-                    if not line.is_empty:
+                    line = shapely.LineString([p - reach * d, q + reach * d])
+                    if line.intersects(shape):
                         lines.append(line)
     return lines
 
@@ -461,13 +525,47 @@ def _emit_part(part: _Part, regions, emit, tol: float) -> None:
             taken = taken.union(region)
         cells.extend(_polygons(shape.difference(taken)))
     if hidden_union is not None:  # hidden regions stay whole: their patches never enter the solve
-        cells = [c for c in cells if not hidden_union.contains(c.representative_point())]
         for poly in _polygons(hidden_union):
             for xy in convex_pieces(poly):
                 emit(part.to_3d(xy), part.face, True)
-    for cell in cells:
+    for cell in _visible_cells(shape, cells, hidden_union, minimum):
         for xy in convex_pieces(cell):
             emit(part.to_3d(xy), part.face, False)
+
+
+def _visible_cells(shape, cells: list, hidden_union, minimum: float) -> list:
+    """The cells outside the hidden regions, made to tile ``shape - hidden`` exactly.
+
+    Cells lie on one side of every outline, so a cell is hidden when an interior point of it
+    is. That partition is checked by area: when round-off in the arrangement leaves a cell
+    straddling a hidden region, or part of the face in no cell, the cells are clipped to the
+    visible face and completed by what they miss, with snap-rounding overlays (``grid_size``),
+    which GEOS computes robustly; its plain overlays can misreport near-coincident vertices
+    (an intersection that returns a whole neighbour it only touches).
+    """
+    if hidden_union is None:
+        out, hidden_area = list(cells), 0.0
+    else:
+        out = [c for c in cells if not hidden_union.contains(c.representative_point())]
+        hidden_area = hidden_union.area
+    if abs(sum(c.area for c in out) + hidden_area - shape.area) <= minimum:
+        return out
+    return _tile_visible(shape, cells, hidden_union, minimum)
+
+
+def _tile_visible(shape, cells: list, hidden_union, minimum: float) -> list:
+    """Visible pieces of the cells plus what they miss, by snap-rounded overlays."""
+    import shapely
+
+    x0, y0, x1, y1 = shape.bounds
+    grid = SNAP_REL * float(np.hypot(x1 - x0, y1 - y0))
+    visible = shape if hidden_union is None else shapely.difference(shape, hidden_union, grid_size=grid)
+    out = []
+    for cell in cells:
+        out.extend(p for p in _polygons(shapely.intersection(cell, visible, grid_size=grid)) if p.area > minimum)
+    covered = shapely.union_all(out, grid_size=grid) if out else shapely.Polygon()
+    out.extend(p for p in _polygons(shapely.difference(visible, covered, grid_size=grid)) if p.area > minimum)
+    return out
 
 
 def subdivide_imprinted(vertices: np.ndarray, faces: list[np.ndarray], face_object: np.ndarray,

@@ -60,7 +60,14 @@ def centroids_and_areas(quads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def triangulate(polygon: np.ndarray) -> np.ndarray:
-    """Triangles (t, 3, 3) of a planar simple polygon (k, 3), convex or not (earcut)."""
+    """Triangles (t, 3, 3) of a planar simple polygon (k, 3), convex or not (earcut).
+
+    Every triangle is wound like the polygon (counter-clockwise around its Newell normal), so
+    the pieces face the way the face does. Earcut works on the polygon projected onto the
+    coordinate plane its normal is most aligned with, and that projection mirrors polygons
+    facing -x, +y or -z; the winding is therefore restored per triangle, by the sign of its
+    normal along the polygon's.
+    """
     import mapbox_earcut
 
     if len(polygon) == 3:
@@ -70,9 +77,12 @@ def triangulate(polygon: np.ndarray) -> np.ndarray:
     axis = int(np.argmax(np.abs(normal)))
     plane = np.delete(centred, axis, axis=1)
     rings = np.array([len(polygon)], dtype=np.uint32)
-    index = np.asarray(mapbox_earcut.triangulate_float64(plane, rings)).reshape(-1, 3)
+    index = np.asarray(mapbox_earcut.triangulate_float64(plane, rings), dtype=np.int64).reshape(-1, 3)
     if len(index) == 0:
         return np.zeros((0, 3, 3))
+    a, b, c = (centred[index[:, k]] for k in range(3))
+    backwards = np.cross(b - a, c - a) @ normal < 0
+    index[backwards] = index[backwards][:, ::-1]
     return polygon[index]
 
 

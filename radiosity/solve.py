@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import hashlib
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 
 from . import _memory
+from ._errors import RadiosityWarning
 from .assembly import FillSettings, FillStats, assemble
 from .cache import FormFactorCache
 from .options import PRESETS, Options
@@ -87,6 +89,9 @@ def prepare(scene: Scene, options: Options) -> Prepared:
         close()
     timings["form factors"] = stats.seconds_formfactors
     timings["visibility"] = stats.seconds_visibility
+    note = visibility.union_note()
+    if note is not None:
+        warnings.warn(note, RadiosityWarning, stacklevel=3)
     if cache is not None:
         cache.store(key, settings, F, stats)
     return Prepared(cut, F, stats, timings)

@@ -164,6 +164,20 @@ class Visibility:
         self._tracer = None
         self.n_rays = 0
         self.n_exact_rows = 0
+        # receiver points whose shadow union GEOS could not compute directly (see _exact._unite)
+        self.union_fallbacks: dict[str, int] = {}
+
+    def union_note(self) -> str | None:
+        """A note counting the receiver points whose shadow union needed a fallback, or None."""
+        snapped = self.union_fallbacks.get("snapped", 0)
+        lost = self.union_fallbacks.get("lower_bound", 0)
+        if not snapped and not lost:
+            return None
+        note = (f"exact shadows: GEOS failed to unite the hidden polygons at {snapped + lost} receiver "
+                f"point(s) (degenerate overlaps); {snapped} were united again with snap-rounding")
+        if lost:
+            note += f", {lost} use their largest hidden polygon (a lower bound of the shadow)"
+        return note
 
     # ------------------------------------------------------------------ classification
     def classify(self, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -335,7 +349,7 @@ class Visibility:
         k = occ[np.repeat(starts[p], count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)]
         return hidden_factors(pts[i[p[r]], a[r]], self.normals[i[p[r]]], r, self.quads[j[p[r]]],
                               self.normals[j[p[r]]], self.occluders.polys[k], self.occluders.normal[k],
-                              PLANE_REL * self.scale)
+                              PLANE_REL * self.scale, self.union_fallbacks)
 
     # ------------------------------------------------------------------ points (final gather)
     def point_fraction(self, points: np.ndarray, normals: np.ndarray, j: np.ndarray, *,
@@ -375,7 +389,7 @@ class Visibility:
             first = np.unique(r, return_index=True)[1]
             hidden[r[first]] = hidden_factors(x[r], nx[r], group.ravel(), self.quads[jj[r]], self.normals[jj[r]],
                                               self.occluders.polys[occ], self.occluders.normal[occ],
-                                              PLANE_REL * self.scale)
+                                              PLANE_REL * self.scale, self.union_fallbacks)
             self.n_exact_rows += len(r)
             out[part] = np.where(unocc > 0, 1.0 - np.minimum(hidden, unocc) / np.where(unocc > 0, unocc, 1.0), 1.0)
         else:

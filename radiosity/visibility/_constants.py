@@ -36,3 +36,8 @@ MAX_UNION = 10
 # Kernel weights below this fraction of a pair's largest weight count as zero when deciding
 # whether a pair's rays agree (a sample on the receiver's horizon carries no light).
 WEIGHT_FLOOR_REL = 1e-12
+
+# Grid of the snap-rounded shapely union used when GEOS's floating overlay fails on a
+# degenerate set of hidden polygons, relative to their extent (far below anything that
+# matters, far above round-off).
+SNAP_REL = 1e-12

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._constants import MAX_UNION
+from ._constants import MAX_UNION, SNAP_REL
 
 __all__ = ["clip_convex", "hidden_polygons", "hidden_factors", "point_factors", "union_factors"]
 
@@ -107,7 +107,7 @@ def hidden_polygons(x: np.ndarray, source: np.ndarray, source_normal: np.ndarray
 
 
 def union_factors(x: np.ndarray, nx: np.ndarray, group: np.ndarray, polys: np.ndarray,
-                  source_normal: np.ndarray) -> np.ndarray:
+                  source_normal: np.ndarray, fallbacks: dict | None = None) -> np.ndarray:
     """Form factor from x to the union of the polygons that share a group (all in one plane).
 
     Parameters
@@ -119,6 +119,9 @@ def union_factors(x: np.ndarray, nx: np.ndarray, group: np.ndarray, polys: np.nd
     polys : (r, k, 3) float
         Convex polygons in the plane of the group's source.
     source_normal : (r, 3) float
+    fallbacks : dict, optional
+        Counts groups whose union needed snap-rounding (``"snapped"``) or fell back to their
+        largest polygon (``"lower_bound"``); see :func:`_unite`.
 
     Returns
     -------
@@ -146,7 +149,11 @@ def union_factors(x: np.ndarray, nx: np.ndarray, group: np.ndarray, polys: np.nd
     slot = np.arange(len(group)) - np.repeat(np.cumsum(count) - count, count)
     table = np.full((n_groups, count.max()), None, dtype=object)
     table[group[order], slot] = geoms[order]
-    unions = shapely.union_all(table, axis=1)
+    extent = float(np.abs(flat).max()) if flat.size else 1.0
+    unions, rescued, lost = _unite(table, SNAP_REL * max(extent, np.finfo(float).tiny))
+    if fallbacks is not None:
+        fallbacks["snapped"] = fallbacks.get("snapped", 0) + int(rescued.sum())
+        fallbacks["lower_bound"] = fallbacks.get("lower_bound", 0) + int(lost.sum())
     parts, part_group = shapely.get_parts(unions, return_index=True)
     is_poly = shapely.get_type_id(parts) == 3
     parts, part_group = parts[is_poly], part_group[is_poly]
@@ -170,15 +177,55 @@ def union_factors(x: np.ndarray, nx: np.ndarray, group: np.ndarray, polys: np.nd
     return np.clip(out, 0.0, None)
 
 
+def _unite(table: np.ndarray, grid: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Union of each row of a (g, c) table of polygons, however degenerate they are.
+
+    GEOS's floating overlay can fail on nearly coincident edges ("TopologyException: side
+    location conflict"). A row where it does is repaired (``make_valid``, else ``buffer(0)``)
+    and united again with snap-rounding on a grid of ``grid`` (OverlayNG with a fixed
+    precision, which is robust; the grid is far below any length that matters); if even that
+    fails, the largest polygon stands for the union (its factor is a lower bound of the
+    hidden one). Returns the unions and, per row, whether it was
+    snapped and whether it fell back to the largest polygon.
+    """
+    import shapely
+    from shapely.errors import GEOSException
+
+    snapped = np.zeros(len(table), bool)
+    lost = np.zeros(len(table), bool)
+    try:
+        return shapely.union_all(table, axis=1), snapped, lost
+    except GEOSException:
+        pass
+    out = np.empty(len(table), dtype=object)
+    for g, row in enumerate(table):
+        try:
+            out[g] = shapely.union_all(row)
+            continue
+        except GEOSException:
+            snapped[g] = True
+        polys = row[row != None]  # noqa: E711
+        for repair in (shapely.make_valid, lambda p: shapely.buffer(p, 0.0)):
+            try:
+                out[g] = shapely.union_all(repair(polys), grid_size=grid)
+                break
+            except GEOSException:
+                continue
+        else:
+            lost[g] = True
+            out[g] = polys[int(np.argmax(shapely.area(polys)))] if len(polys) else shapely.Polygon()
+    return out, snapped & ~lost, lost
+
+
 def hidden_factors(x: np.ndarray, nx: np.ndarray, group: np.ndarray, source: np.ndarray,
                    source_normal: np.ndarray, occluder: np.ndarray, occluder_normal: np.ndarray,
-                   tol: float) -> np.ndarray:
+                   tol: float, fallbacks: dict | None = None) -> np.ndarray:
     """Form factor of the hidden part of each group's source (rows: one occluder each).
 
     Rows of a group share x, nx and source; the result is indexed by group (0..g-1). The
     compiled kernel clips every row and unites a group's hidden polygons by inclusion-exclusion
     over their (convex) intersections; groups where more than ``MAX_UNION`` occluders hide
-    something are united with shapely instead.
+    something are united with shapely instead (``fallbacks``: see :func:`union_factors`).
     """
     from ._exact_kernel import hidden_groups
 
@@ -197,11 +244,11 @@ def hidden_factors(x: np.ndarray, nx: np.ndarray, group: np.ndarray, source: np.
         rows = order[np.concatenate([np.arange(starts[g], starts[g + 1]) for g in bad])]
         _, local = np.unique(group[rows], return_inverse=True)
         out[bad] = _hidden_factors_shapely(x[rows], nx[rows], local.ravel(), source[rows], source_normal[rows],
-                                           occluder[rows], occluder_normal[rows], tol)
+                                           occluder[rows], occluder_normal[rows], tol, fallbacks)
     return out
 
 
-def _hidden_factors_shapely(x, nx, group, source, source_normal, occluder, occluder_normal, tol):
+def _hidden_factors_shapely(x, nx, group, source, source_normal, occluder, occluder_normal, tol, fallbacks=None):
     """:func:`hidden_factors` with every group of two or more hidden polygons united by shapely."""
     from ._exact_kernel import hidden_rows
 
@@ -221,7 +268,7 @@ def _hidden_factors_shapely(x, nx, group, source, source_normal, occluder, occlu
         rows = np.flatnonzero(multi)
         _, polys, _ = hidden_rows(*(a[rows] for a in args), float(tol), True)
         groups, local = np.unique(group[rows], return_inverse=True)
-        out[groups] = union_factors(x[rows], nx[rows], local.ravel(), polys, source_normal[rows])
+        out[groups] = union_factors(x[rows], nx[rows], local.ravel(), polys, source_normal[rows], fallbacks)
     return out
 
 
