@@ -13,6 +13,7 @@ import contextlib
 import os
 import signal
 import sys
+import threading
 
 PROG = "radiosity"
 INTERRUPTED_LINE = f"{PROG}: interrupted; earlier outputs and the cache are left as they were"
@@ -44,6 +45,24 @@ def exit_status(exc: BaseException) -> int:
             return EXIT_TERMINATED
         exc = exc.__cause__ or exc.__context__
     return EXIT_INTERRUPTED
+
+
+@contextlib.contextmanager
+def signals_held():
+    """Hold SIGINT and SIGTERM back for the block; one that came meanwhile is handled after it.
+
+    For imports of C extensions whose module initialisation crashes when a Python exception
+    interrupts it (VTK segfaulted when Ctrl-C landed inside ``import pyvista``). Only the main
+    thread can change the mask meaningfully, and not on every platform: elsewhere a no-op.
+    """
+    held = {signal.SIGINT, signal.SIGTERM}
+    can_hold = hasattr(signal, "pthread_sigmask") and threading.current_thread() is threading.main_thread()
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held) if can_hold else None
+    try:
+        yield
+    finally:
+        if can_hold:
+            signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 @contextlib.contextmanager

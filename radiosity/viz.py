@@ -14,6 +14,19 @@ __all__ = ["to_polydata", "tone_map", "render", "scene_camera", "parse_camera", 
 CORNELL_CAMERA = ((0.278, 0.273, -0.8), (0.278, 0.273, 0.0), (0.0, 1.0, 0.0), 39.3)
 
 
+def pyvista():
+    """The pyvista module, first imported with Ctrl-C and SIGTERM held back (see
+    :func:`radiosity._startup.signals_held`): a signal inside VTK's initialisation segfaulted."""
+    import sys
+
+    if "pyvista" not in sys.modules:
+        from ._startup import signals_held
+
+        with signals_held():
+            import pyvista as pv  # noqa: F401 - loads VTK with signals held
+    return sys.modules["pyvista"]
+
+
 def tone_map(radiance: np.ndarray, exposure: float) -> np.ndarray:
     """Linear radiance (..., 3) times exposure, clipped, to 8-bit sRGB."""
     x = np.clip(radiance * exposure, 0.0, 1.0)
@@ -63,7 +76,7 @@ def to_polydata(solution):
     ``object_names``; point data: ``radiosity`` (area-weighted over the patches of the same
     object meeting at the vertex).
     """
-    import pyvista as pv
+    pv = pyvista()
 
     vertices, faces, vertex_b = solution.vertex_mesh
     cells = np.concatenate([np.concatenate([[len(f)], f]) for f in faces]).astype(np.int64)
@@ -82,7 +95,7 @@ def _render_mesh(solution):
     they have collinear points, which VTK's polygon triangulation mishandles (stray pixels);
     a fan from a corner gives only proper or zero-area triangles.
     """
-    import pyvista as pv
+    pv = pyvista()
 
     vertices, faces, vertex_b = solution.vertex_mesh
     tris = np.concatenate([np.column_stack([np.full(len(f) - 2, f[0]), f[1:-1], f[2:]]) for f in faces])
@@ -371,7 +384,7 @@ def render(solution, path: str | Path | None = None, *, window_size=(800, 800), 
     ``camera``: a :class:`Camera` or ``"X,Y,Z[:TX,TY,TZ[:ANGLE]]"``; default: the OBJ's
     ``# camera:`` line, else a view from inside the room (:func:`auto_camera`), else from outside.
     """
-    import pyvista as pv
+    pv = pyvista()
 
     _quiet_vtk()
     mesh = _render_mesh(solution)

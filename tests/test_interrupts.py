@@ -29,7 +29,9 @@ def run_cli(out: Path, cache: Path, *, interrupt_after: float | None = None,
     command = [sys.executable, "-m", "radiosity", "solve", str(ROOM), "--preset", "draft",
                "--no-picture", "-o", str(out)]
     env = {"RADIOSITY_CACHE": str(cache), "PYTHONFAULTHANDLER": "1", "PATH": "/usr/bin:/bin"}
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    # A shell's background jobs inherit SIGINT ignored, and Python then keeps it ignored: reset it.
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     if interrupt_after is not None:
         time.sleep(interrupt_after)
         process.send_signal(sig)

@@ -40,7 +40,9 @@ def read_result(path: Path):
     import logging
     import warnings
 
-    import pyvista as pv
+    from ..viz import pyvista
+
+    pv = pyvista()
 
     if not path.exists():
         raise SceneError(f"{path}: no such result; run 'radiosity solve -o OUTDIR' first")
@@ -121,7 +123,9 @@ def _write_page(mesh, path: Path, target: Path) -> int:
 
 def run(args) -> int:
     import numpy as np
-    import pyvista as pv
+    from ..viz import pyvista
+
+    pv = pyvista()
 
     from ..viz import _quiet_vtk, apply_camera, tone_map
 
