@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 from pathlib import Path
@@ -10,8 +11,11 @@ import numpy as np
 
 from .._errors import SceneError
 from ..io.export import atomic_path, staged_outputs, write_ply, write_png, write_summary, write_vtp
+from ..io.obj import MAX_COORDINATE
 from ..solve import solve
 from ._common import add_scene_args, load, overrides
+
+SENSOR_RTOL = 1e-3  # default bound on a sensor value's relative error from shadows
 
 NAME = "solve"
 HELP = "solve a scene's radiosity and write a picture, meshes and summary.json"
@@ -27,6 +31,20 @@ def add_args(parser) -> None:
     parser.add_argument("--no-picture", action="store_true", help="skip the PNG")
     parser.add_argument("--points", type=Path, default=None, metavar="FILE",
                         help="text file of receiver points 'x y z nx ny nz' per line; writes irradiance.csv")
+    parser.add_argument("--sensor-rtol", type=sensor_rtol, default=SENSOR_RTOL, metavar="RTOL",
+                        help="bound on the relative error of each --points value due to shadows "
+                             "(0: every shadow exact; default: %(default)g)")
+
+
+def sensor_rtol(text: str) -> float:
+    """argparse type of ``--sensor-rtol``: a finite number in [0, 1)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not 0.0 <= value < 1.0:
+        raise argparse.ArgumentTypeError(f"must be in [0, 1), got {text!r}")
+    return value
 
 
 def format_summary(solution, load_seconds: float) -> str:
@@ -72,12 +90,27 @@ def read_points(path: Path) -> np.ndarray:
             raise SceneError(f"{path}:{number}: expected 6 numbers 'x y z nx ny nz', got {line!r}") from None
         if len(values) != 6 or not np.isfinite(values).all():
             raise SceneError(f"{path}:{number}: expected 6 finite numbers 'x y z nx ny nz', got {line!r}")
-        if not any(values[3:]):
-            raise SceneError(f"{path}:{number}: the normal (nx ny nz) is zero")
-        rows.append(values)
+        rows.append(_checked_point(path, number, values))
     if not rows:
         raise SceneError(f"{path}: no points (expected lines of 'x y z nx ny nz')")
     return np.asarray(rows)
+
+
+def _checked_point(path: Path, number: int, values: list[float]) -> list[float]:
+    """One receiver 'x y z nx ny nz' with its normal made unit, or a SceneError naming the line.
+
+    The normal is scaled by its largest component before it is normalised, so tiny (1e-320) and
+    huge (1e300) normals keep their direction instead of underflowing or overflowing.
+    """
+    point, normal = np.array(values[:3]), np.array(values[3:])
+    if np.abs(point).max() > MAX_COORDINATE:
+        raise SceneError(f"{path}:{number}: a coordinate exceeds {MAX_COORDINATE:g} in absolute value")
+    largest = np.abs(normal).max()
+    if largest == 0.0:
+        raise SceneError(f"{path}:{number}: the normal (nx ny nz) is zero")
+    normal = normal / largest
+    normal /= np.linalg.norm(normal)
+    return [*point.tolist(), *normal.tolist()]
 
 
 def run(args) -> int:
@@ -93,7 +126,9 @@ def run(args) -> int:
     with staged_outputs(out) as stage:
         solution = solve(scene, preset=args.preset, solver=args.solver, progress=sys.stderr.isatty(),
                          **overrides(args))
-        h = solution.irradiance(points[:, :3], points[:, 3:]) if points is not None else None
+        h = None
+        if points is not None:
+            h = solution.irradiance(points[:, :3], points[:, 3:], rtol=args.sensor_rtol)
         summary = solution.summary()
         write_vtp(solution, stage / "solution.vtp")
         write_ply(solution, stage / "solution.ply")
