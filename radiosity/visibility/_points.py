@@ -28,7 +28,28 @@ from scipy.spatial import ConvexHull, QhullError
 from ._constants import MAX_UNION, PLANE_REL
 from ._occluders import Occluders, build_occluders
 
-__all__ = ["SensorGather", "inside_hull"]
+__all__ = ["SensorGather", "clusters", "inside_hull"]
+
+# Receiver points per cluster: the cluster's box is classified against each source once, and
+# only the partly occluded boxes are classified point by point.
+CLUSTER_SIZE = 32
+
+
+def clusters(points: np.ndarray, size: int = CLUSTER_SIZE) -> tuple[np.ndarray, np.ndarray]:
+    """Runs of ``size`` points along a Morton (Z-order) curve: spatially compact groups.
+
+    Returns (members, starts): cluster c holds points ``members[starts[c]:starts[c + 1]]``.
+    """
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    span = np.where(hi > lo, hi - lo, 1.0)
+    cells = np.minimum(((points - lo) / span * 1024).astype(np.int64), 1023)  # 10 bits per axis
+    code = np.zeros(len(points), np.int64)
+    for bit in range(10):
+        for axis in range(3):
+            code |= ((cells[:, axis] >> bit) & 1) << (3 * bit + axis)
+    members = np.argsort(code, kind="stable").astype(np.int64)
+    starts = np.r_[np.arange(0, len(points), size), len(points)].astype(np.int64)
+    return members, starts
 
 
 def inside_hull(points: np.ndarray, vertices: np.ndarray, tol: float) -> np.ndarray:
@@ -118,8 +139,9 @@ class SensorGather:
     def _gather(self, x: np.ndarray, nx: np.ndarray, occ: Occluders, rtol: float) -> np.ndarray:
         from ._points_kernel import sensor_irradiance
 
+        members, starts = clusters(x)
         h, ok, n_exact = sensor_irradiance(
-            x, nx, self.quads, self.normals, self.centroid, self.radiosity, self.lit, occ.polys, occ.normal,
+            x, nx, members, starts, self.quads, self.normals, self.centroid, self.radiosity, self.lit, occ.polys, occ.normal,
             occ.center, occ.inward, occ.lo, occ.hi, occ.node_lo, occ.node_hi, occ.node_left, occ.node_right,
             occ.node_start, occ.node_count, occ.order, self.tol, self.tol, float(rtol), MAX_UNION)
         self.n_exact += int(n_exact.sum())
