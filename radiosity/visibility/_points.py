@@ -141,8 +141,8 @@ class SensorGather:
 
         members, starts = clusters(x)
         h, ok, n_exact = sensor_irradiance(
-            x, nx, members, starts, self.quads, self.normals, self.centroid, self.radiosity, self.lit, occ.polys, occ.normal,
-            occ.center, occ.inward, occ.lo, occ.hi, occ.node_lo, occ.node_hi, occ.node_left, occ.node_right,
+            x, nx, members, starts, self.quads, self.normals, self.centroid, self.radiosity, self.lit, occ.polys,
+            occ.normal, occ.center, occ.inward, occ.lo, occ.hi, occ.node_lo, occ.node_hi, occ.node_left, occ.node_right,
             occ.node_start, occ.node_count, occ.order, self.tol, self.tol, float(rtol), MAX_UNION)
         self.n_exact += int(n_exact.sum())
         bad = np.flatnonzero(~ok)
