@@ -108,7 +108,9 @@ def test_points_outside_the_closed_cube_read_zero(cube, xyz, direction):
     n = np.array(direction)
     if np.abs(x - 0.5).max() <= 0.5 + 1e-6 or np.linalg.norm(n) < 1e-3:
         return  # inside (or on) the cube, or no direction
-    assert (cube.irradiance(x[None], n[None]) <= 1e-12).all()  # 0 to round-off (grazing edges)
+    # 0, up to round-off where the point lies in the planes of two faces and sees a sliver of a
+    # third along their common edge (hypothesis finds such points: 5e-17)
+    assert (cube.irradiance(x[None], n[None]) <= 1e-12).all()
 
 
 def test_closed_cube_under_the_floor_and_on_every_side(cube):

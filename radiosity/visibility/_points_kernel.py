@@ -305,6 +305,7 @@ def _point_value(p, x, nx, quads, normals, centroid, radiosity, lit, status, pol
     vi = x[p:p + 1]  # the point as a one-vertex receiver
     none = occ[:0]
     h[:] = 0.0
+    unoccluded = np.zeros(3)
     n_cand = 0
     for t in range(n_lit):
         if status[t] == 1:
@@ -323,6 +324,8 @@ def _point_value(p, x, nx, quads, normals, centroid, radiosity, lit, status, pol
         f = _lambert(xp, np_, quads[j], ns, s2)
         if f <= 0.0:
             continue
+        for c in range(3):
+            unoccluded[c] += f * radiosity[j, c]
         st = status[t]
         if st == 2:
             _cap(xp, quads[j], ns, src_cap)
@@ -375,7 +378,8 @@ def _point_value(p, x, nx, quads, normals, centroid, radiosity, lit, status, pol
             for c in range(3):
                 h[c] += seen * radiosity[j, c]
     for c in range(3):
-        out[p, c] = h[c]
+        # round-off of light hidden whole (a point inside a solid) is 0
+        out[p, c] = h[c] if h[c] > _SEEN_FLOOR * unoccluded[c] else 0.0
 
 
 @njit(cache=True, parallel=True)
