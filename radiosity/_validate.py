@@ -21,11 +21,13 @@ def as_points(x, name: str) -> np.ndarray:
 def as_unit_vectors(x, name: str) -> np.ndarray:
     """Return ``x`` as (m, 3) unit vectors (normalised) or raise if a row has zero length."""
     arr = as_points(x, name)
-    length = np.linalg.norm(arr, axis=1)
-    if (length == 0).any():
-        bad = int(np.flatnonzero(length == 0)[0])
+    # scaled by the largest component first, so 1e-320 or 1e300 keep their direction
+    largest = np.abs(arr).max(axis=1) if len(arr) else np.zeros(0)
+    if (largest == 0).any():
+        bad = int(np.flatnonzero(largest == 0)[0])
         raise ValueError(f"{name} must be non-zero vectors; row {bad} is zero")
-    return arr / length[:, None]
+    arr = arr / largest[:, None]
+    return arr / np.linalg.norm(arr, axis=1)[:, None]
 
 
 def as_polygon(x, name: str) -> np.ndarray:

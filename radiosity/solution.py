@@ -10,7 +10,6 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._validate import as_points, as_unit_vectors
-from .formfactors import lambert_pairs
 from .scene import Scene
 
 __all__ = ["Solution"]
@@ -39,6 +38,7 @@ class Solution:
     solver: Any = None
     energy: dict[str, list[float]] = field(default_factory=dict)
     cache_hit: bool = False
+    _sensors: Any = field(default=None, init=False, repr=False)
 
     @property
     def patch_irradiance(self) -> np.ndarray:
@@ -88,43 +88,41 @@ class Solution:
         vertex_b = sums / np.maximum(wsum, 1e-300)[:, None]
         return vertices, faces, vertex_b
 
-    def irradiance(self, points, normals, *, samples: int = 2) -> np.ndarray:
+    def irradiance(self, points, normals, *, rtol: float = 1e-3, samples: int | None = None) -> np.ndarray:
         """Irradiance H (m, 3) at receiver points, W/m^2, occlusion included (final gather).
+
+        Every face shadows every point (faces on the scene's hull too, for points outside it),
+        and partly occluded sources are clipped by exact shadows, so a point's value depends
+        only on that point: never on the other points or their order.
 
         Parameters
         ----------
         points : (m, 3) float
             Receiver positions, metres (e.g. a sensor grid on a desk).
         normals : (m, 3) float
-            Receiver normals; only light arriving on their side counts.
-        samples : int, default: 2
-            Sample points per direction on each patch for shadow rays (samples**2 per pair).
+            Receiver normals (any non-zero length); only light arriving on their side counts.
+        rtol : float, default: 1e-3
+            Bound on each value's relative error from shadows, per channel: partly occluded
+            sources whose contributions add up to less than ``2 rtol H`` are counted half
+            visible instead of clipped. 0 clips every shadow exactly.
+        samples : None
+            Ignored (kept so older calls still run; shadows are exact, not sampled).
         """
         from .visibility import Visibility
+        from .visibility._points import SensorGather
 
         points = as_points(points, "points")
         normals = as_unit_vectors(normals, "normals")
         if len(points) != len(normals):
             raise ValueError(f"points and normals must have the same length, got {len(points)} and {len(normals)}")
-        scene = self.scene
-        vis = Visibility(scene.patch_quads, scene.patch_normal, scene.patch_object, scene.scale, samples=samples)
-        out = np.zeros((len(points), 3))
-        n = scene.n_patches
-        block = max(1, 1_000_000 // max(n, 1))
-        lit = np.flatnonzero(self.radiosity.any(axis=1))
-        for start in range(0, len(points), block):
-            x, nx = points[start:start + block], normals[start:start + block]
-            r = np.repeat(np.arange(len(x)), len(lit))
-            j = np.tile(lit, len(x))
-            # source patch must face the point
-            front = np.einsum("mc,mc->m", x[r] - scene.patch_centroid[j], scene.patch_normal[j]) > 0
-            r, j = r[front], j[front]
-            f = lambert_pairs(x[r], nx[r], scene.patch_quads[j])
-            nz = f > 0
-            r, j, f = r[nz], j[nz], f[nz]
-            f *= vis.point_fraction(x[r], nx[r], j)
-            np.add.at(out[start:start + block], r, f[:, None] * self.radiosity[j])
-        return out
+        if not (np.isfinite(rtol) and 0.0 <= rtol < 1.0):
+            raise ValueError(f"rtol must be in [0, 1), got {rtol!r}")
+        if self._sensors is None or not np.array_equal(self._sensors.radiosity, self.radiosity):
+            scene = self.scene
+            vis = Visibility(scene.patch_quads, scene.patch_normal, scene.patch_object, scene.scale)
+            self._sensors = SensorGather(scene.patch_quads, scene.patch_normal, scene.patch_object, scene.scale,
+                                         self.radiosity.copy(), inner=vis.occluders)
+        return self._sensors.irradiance(points, normals, rtol=rtol)
 
     def summary(self) -> dict[str, Any]:
         """Machine-readable summary (what ``summary.json`` holds)."""

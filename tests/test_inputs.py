@@ -152,3 +152,21 @@ def test_an_emission_that_would_overflow_is_refused_with_its_line(tmp_path):
     obj.write_text("mtllib a.mtl\nusemtl lamp\n" + TRIANGLE)
     with pytest.raises(SceneError, match=r"a\.mtl:3: Ke is beyond 1e\+30"):
         radiosity.load_scene(obj)
+
+
+def test_points_files_follow_the_same_rules(tmp_path):
+    from radiosity.cli._solve import read_points
+
+    bom = tmp_path / "bom.txt"
+    bom.write_bytes(b"\xef\xbb\xbf0 0 0 0 0 1\r0.5 0.5 0 0 0 1\n")  # BOM, and a lone CR between lines
+    np.testing.assert_array_equal(read_points(bom)[:, 0], [0.0, 0.5])
+    bad = tmp_path / "bad.txt"
+    bad.write_text("0 0 0 0 0 1\n1_0 0 0 0 0 1\n")
+    with pytest.raises(SceneError, match=r"bad\.txt:2: expected 6 numbers"):
+        read_points(bad)
+    fifo = tmp_path / "fifo.txt"
+    os.mkfifo(fifo)
+    with pytest.raises(SceneError, match="FIFO"):
+        read_points(fifo)
+    with pytest.raises(SceneError, match="character device"):
+        read_points(Path("/dev/zero"))

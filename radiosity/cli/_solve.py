@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 from pathlib import Path
@@ -12,11 +13,15 @@ from .._errors import SceneError
 from .._kernels import FIRST_RUN_MESSAGE, compile_timer, kernels_on_disk, warm_up
 from ..io.export import atomic_path, staged_outputs, write_glb, write_ply, write_png, write_summary, write_vtp
 from ..io.html import write_html
+from ..io._text import decode, excerpt, parse_float, read_input, split_lines
+from ..io.obj import MAX_COORDINATE
 from ..solve import solve
 from ..system import DIRECT_MAX
 from ..viz import auto_exposure, white_balanced
 from ._common import add_camera_arg, add_scene_args, load, overrides, unit_scale
 from ._record import run_record
+
+SENSOR_RTOL = 1e-3  # default bound on a sensor value's relative error from shadows
 
 NAME = "solve"
 HELP = "solve a scene's radiosity and write a picture, meshes and summary.json"
@@ -44,6 +49,20 @@ def add_args(parser) -> None:
     parser.add_argument("--points", type=Path, default=None, metavar="FILE",
                         help="text file of receiver points 'x y z nx ny nz' per line, in the scene's "
                              "--units; writes irradiance.csv")
+    parser.add_argument("--sensor-rtol", type=sensor_rtol, default=SENSOR_RTOL, metavar="RTOL",
+                        help="bound on the relative error of each --points value due to shadows "
+                             "(0: every shadow exact; default: %(default)g)")
+
+
+def sensor_rtol(text: str) -> float:
+    """argparse type of ``--sensor-rtol``: a finite number in [0, 1)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not 0.0 <= value < 1.0:
+        raise argparse.ArgumentTypeError(f"must be in [0, 1), got {text!r}")
+    return value
 
 
 def format_summary(solution, load_seconds: float, compile_seconds: float = 0.0) -> str:
@@ -88,25 +107,23 @@ def fmt3(v) -> str:
 def read_points(path: Path) -> np.ndarray:
     """Receiver points and normals (m, 6) from a text file, one 'x y z nx ny nz' per line."""
     try:
-        data = path.read_bytes()
+        data = read_input(path, "points")  # regular files only, below the input limit
     except FileNotFoundError:
         raise SceneError(f"points file '{path}' does not exist") from None
     except OSError as exc:
         raise SceneError(f"cannot read points file '{path}': {exc.strerror or exc}") from None
     rows = []
-    for number, line in enumerate(data.decode("utf-8", errors="replace").splitlines(), start=1):
+    for number, line in enumerate(split_lines(decode(data)), start=1):  # BOM dropped, lone CR ends a line
         text = line.split("#", 1)[0].strip().replace(",", " ")
         if not text:
             continue
         try:
-            values = [float(t) for t in text.split()]
+            values = [parse_float(t) for t in text.split()]
         except ValueError:
-            raise SceneError(f"{path}:{number}: expected 6 numbers 'x y z nx ny nz', got {line!r}") from None
+            raise SceneError(f"{path}:{number}: expected 6 numbers 'x y z nx ny nz', got {excerpt(line)!r}") from None
         if len(values) != 6 or not np.isfinite(values).all():
-            raise SceneError(f"{path}:{number}: expected 6 finite numbers 'x y z nx ny nz', got {line!r}")
-        if not any(values[3:]):
-            raise SceneError(f"{path}:{number}: the normal (nx ny nz) is zero")
-        rows.append(values)
+            raise SceneError(f"{path}:{number}: expected 6 finite numbers 'x y z nx ny nz', got {excerpt(line)!r}")
+        rows.append(_checked_point(path, number, values))
     if not rows:
         raise SceneError(f"{path}: no points (expected lines of 'x y z nx ny nz')")
     return np.asarray(rows)
@@ -133,6 +150,23 @@ OUTPUT_NAMES = ("solution.vtp", "solution.ply", "solution.glb", "solution.html",
                 "summary.json")
 
 
+def _checked_point(path: Path, number: int, values: list[float]) -> list[float]:
+    """One receiver 'x y z nx ny nz' with its normal made unit, or a SceneError naming the line.
+
+    The normal is scaled by its largest component before it is normalised, so tiny (1e-320) and
+    huge (1e300) normals keep their direction instead of underflowing or overflowing.
+    """
+    point, normal = np.array(values[:3]), np.array(values[3:])
+    if np.abs(point).max() > MAX_COORDINATE:
+        raise SceneError(f"{path}:{number}: a coordinate exceeds {MAX_COORDINATE:g} in absolute value")
+    largest = np.abs(normal).max()
+    if largest == 0.0:
+        raise SceneError(f"{path}:{number}: the normal (nx ny nz) is zero")
+    normal = normal / largest
+    normal /= np.linalg.norm(normal)
+    return [*point.tolist(), *normal.tolist()]
+
+
 def run(args) -> int:
     t0 = time.perf_counter()
     scene = load(args)
@@ -152,7 +186,9 @@ def run(args) -> int:
             warm_up()
         solution = solve(scene, preset=args.preset, solver=args.solver, progress=sys.stderr.isatty(),
                          **overrides(args))
-        h = solution.irradiance(points[:, :3] * to_metres, points[:, 3:]) if points is not None else None
+        h = None
+        if points is not None:
+            h = solution.irradiance(points[:, :3] * to_metres, points[:, 3:], rtol=args.sensor_rtol)
         summary = solution.summary()
         write_vtp(solution, stage / "solution.vtp")
         write_ply(solution, stage / "solution.ply")
