@@ -14,23 +14,10 @@ from hypothesis import strategies as st
 import radiosity
 from radiosity import SceneError
 from radiosity.io._text import ENV_MAX_INPUT, excerpt, parse_float, split_lines
+from test_view3d import PLATES
 
 TRIANGLE = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
-VS3_SQUARES = """T two squares
-C encl=0
-F 3
-V 1 0 0 0
-V 2 1 0 0
-V 3 1 1 0
-V 4 0 1 0
-V 5 0 0 1
-V 6 0 1 1
-V 7 1 1 1
-V 8 1 0 1
-S 1 1 2 3 4 0 0 0.9 bottom
-S 2 5 6 7 8 0 0 0.9 top
-End of data
-"""
+VS3_SQUARES = PLATES.split("O 3")[0] + "E\n"  # the two plates without their blocker
 
 
 def test_a_fifo_is_refused_without_blocking(tmp_path):
@@ -121,10 +108,10 @@ def test_underscores_and_foreign_digits_are_refused_with_their_line(tmp_path):
         radiosity.load_scene(obj)
     vs3 = tmp_path / "a.vs3"
     vs3.write_text(VS3_SQUARES.replace("V 2 1 0 0", "V 2 1_0 0 0"))
-    with pytest.raises(SceneError, match=r"a\.vs3:5: .*must be a number"):
+    with pytest.raises(SceneError, match=r"a\.vs3:6: .*must be a number"):
         radiosity.load_scene(vs3)
     vs3.write_text(VS3_SQUARES.replace("V 2 1 0 0", "V \u0662 1 0 0"))
-    with pytest.raises(SceneError, match=r"a\.vs3:5: .*must be a number"):
+    with pytest.raises(SceneError, match=r"a\.vs3:6: .*must be a number"):
         radiosity.load_scene(vs3)
 
 
@@ -132,7 +119,7 @@ def test_a_vs3_coordinate_that_would_overflow_is_refused(tmp_path):
     """A .vs3 vertex at 1e200 gave an OverflowError traceback."""
     vs3 = tmp_path / "a.vs3"
     vs3.write_text(VS3_SQUARES.replace("V 7 1 1 1", "V 7 1e200 1 1"))
-    with pytest.raises(SceneError, match=r"a\.vs3:10: a coordinate is beyond"):
+    with pytest.raises(SceneError, match=r"a\.vs3:11: a coordinate is beyond"):
         radiosity.load_scene(vs3)
 
 
