@@ -268,3 +268,21 @@ def test_bundled_cornell_box_with_picture(tmp_path, capsys):
     assert "picture.png" in capsys.readouterr().out
     assert (out / "picture.png").stat().st_size > 1000
     assert sorted(p.name for p in out.iterdir()) == ["picture.png", *OUTPUTS]
+
+
+def test_a_full_disk_is_refused_before_any_output_is_written(tmp_path, capsys, monkeypatch):
+    """VTK aborted the process (exit 134, no message) when solution.vtp did not fit."""
+    import collections
+    import shutil as shutil_module
+
+    out = tmp_path / "out"
+    assert main(solve_args(out)) == 0
+    before = snapshot(out)
+    capsys.readouterr()
+    usage = collections.namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil_module, "disk_usage", lambda path: usage(10**9, 10**9 - 1000, 1000))
+    code = main(solve_args(out))
+    line = assert_one_line_error(capsys, code, "not enough free space", "MB needed")
+    assert str(out) in line
+    assert snapshot(out) == before
+    assert not [p for p in out.iterdir() if p.name.startswith(STAGING_PREFIX)]

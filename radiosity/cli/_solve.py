@@ -11,7 +11,8 @@ import numpy as np
 
 from .._errors import SceneError
 from .._kernels import FIRST_RUN_MESSAGE, compile_timer, kernels_on_disk, warm_up
-from ..io.export import atomic_path, staged_outputs, write_glb, write_ply, write_png, write_summary, write_vtp
+from ..io.export import (atomic_path, check_free_space, output_bytes, staged_outputs, write_glb, write_ply,
+                         write_png, write_summary, write_vtp)
 from ..io.html import write_html
 from ..io._text import decode, excerpt, parse_float, read_input, split_lines
 from ..io.obj import MAX_COORDINATE
@@ -186,6 +187,7 @@ def run(args) -> int:
             warm_up()
         solution = solve(scene, preset=args.preset, solver=args.solver, progress=sys.stderr.isatty(),
                          **overrides(args))
+        check_free_space(stage, output_bytes(solution.scene.n_patches, 0 if points is None else len(points)))
         h = None
         if points is not None:
             h = solution.irradiance(points[:, :3] * to_metres, points[:, 3:], rtol=args.sensor_rtol)

@@ -73,6 +73,30 @@ def _unlink(path) -> None:
 STAGING_PREFIX = ".radiosity-partial-"
 
 
+# Bytes a solve's outputs take per patch (VTP + PLY + glb + HTML, measured on the Cornell box:
+# about 620 per patch), with room to spare, plus the picture and summary.
+OUTPUT_BYTES_PER_PATCH = 2048
+OUTPUT_BYTES_FIXED = 4 << 20
+OUTPUT_BYTES_PER_POINT = 160  # irradiance.csv
+
+
+def output_bytes(n_patches: int, n_points: int = 0) -> int:
+    """A generous estimate of the bytes ``radiosity solve`` writes for a solution."""
+    return OUTPUT_BYTES_FIXED + OUTPUT_BYTES_PER_PATCH * int(n_patches) + OUTPUT_BYTES_PER_POINT * int(n_points)
+
+
+def check_free_space(folder: str | Path, needed: int) -> None:
+    """Refuse before writing when ``folder``'s file system has less than ``needed`` bytes free.
+
+    VTK aborts the whole process (SIGABRT, no message) when a write runs out of space half-way,
+    so a full disk has to be caught before the first file is written.
+    """
+    free = shutil.disk_usage(folder).free
+    if free < needed:
+        raise OSError(errno.ENOSPC, f"not enough free space to write the outputs: about {needed / 1e6:,.1f} MB "
+                                    f"needed, {free / 1e6:,.1f} MB free", str(folder))
+
+
 @contextlib.contextmanager
 def staged_outputs(folder: str | Path, owned: tuple[str, ...] = ()):
     """Yield a hidden staging folder inside ``folder``; move its files into ``folder`` on success.
