@@ -181,7 +181,8 @@ def test_fill_settings_validate():
 
 @pytest.mark.parametrize("mode", ["exact", "rays"])
 def test_fill_classifies_each_pair_once_for_both_directions(mode):
-    """assemble classifies (i, j) and (j, i) together; every entry is still f_ij x fraction(i, j)."""
+    """assemble classifies (i, j) and (j, i) together; every entry is still f_ij x fraction(i, j)
+    (rays) or f_ij - hidden(i, j) (exact shadows over shadow-aligned cells)."""
     from test_visibility import boxes_scene
 
     quads, groups = boxes_scene()
@@ -198,7 +199,20 @@ def test_fill_classifies_each_pair_once_for_both_directions(mode):
 
     f = unoccluded_factors(quads, normals, centroid, area, i, j, settings)
     fresh = Visibility(quads, normals, groups, 1.8, samples=2, max_samples=4)
-    expected = f * fresh.fraction(i, j, exact=mode == "exact", order=3)
+    if mode == "exact":
+        from radiosity.visibility import MAYBE
+        from radiosity.visibility._constants import SHADOW_RTOL_SHARE
+
+        status, rows, occ = fresh.classify(i, j)
+        expected = np.where(status == 1, 0.0, f)
+        part = np.flatnonzero(status == MAYBE)
+        local = np.full(len(i), -1)
+        local[part] = np.arange(len(part))
+        hidden = fresh.exact_hidden(i[part], j[part], local[rows], occ, SHADOW_RTOL_SHARE * settings.formfactor_rtol,
+                                    f[part])
+        expected[part] = np.clip(f[part] - hidden, 0.0, f[part])
+    else:
+        expected = f * fresh.fraction(i, j)
     np.testing.assert_allclose(F.toarray()[i, j], np.where(expected > 1e-12, expected, 0.0), rtol=1e-12, atol=1e-15)
     assert F.nnz == np.count_nonzero(expected > 1e-12)
 

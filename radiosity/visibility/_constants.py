@@ -36,3 +36,17 @@ MAX_UNION = 10
 # Kernel weights below this fraction of a pair's largest weight count as zero when deciding
 # whether a pair's rays agree (a sample on the receiver's horizon carries no light).
 WEIGHT_FLOOR_REL = 1e-12
+
+# Partly occluded pairs per call of the shadow-aligned cell integration (``_cells_kernel``).
+CHUNK_CELL_PAIRS = 65_536
+
+# The exact shadows' Gauss orders aim at this share of the fill's ``formfactor_rtol`` (the
+# a-priori bound is not a guarantee; the unoccluded factor's own error adds to it).
+SHADOW_RTOL_SHARE = 0.1
+
+
+# Fills whose formfactor_rtol is below this (view_factors' 1e-6, the fine preset) integrate
+# exact shadows over shadow-aligned receiver cells (``_cells_kernel``); cheaper ones (draft,
+# default) keep the fixed receiver points, which cost 9 points a pair where the cells cost
+# 16-200 (the Cornell box's default solve took 39 s instead of 17 s with the cells).
+SHADOW_CELLS_BELOW = 1e-4
