@@ -231,7 +231,7 @@ def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettin
             unocc = f[nz[part[sel]]]
             hidden = visibility.exact_hidden(pi[sel], pj[sel], where[local[rows[keep]]], occ[keep],
                                              SHADOW_RTOL_SHARE * settings.formfactor_rtol, unocc,
-                                             fallback_order=settings.near_order)
+                                             fallback_order=max(settings.near_order, 8))
             seen = np.clip(unocc - hidden, 0.0, unocc)
             frac[sel] = np.where(unocc > 0, seen / np.where(unocc > 0, unocc, 1.0), 1.0)
         else:

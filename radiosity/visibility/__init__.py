@@ -31,8 +31,8 @@ from scipy.spatial import ConvexHull, QhullError
 from .. import _tol
 from ..quadrature import patch_points
 from . import _occluders
-from ._constants import (CHUNK_CELL_PAIRS, CHUNK_CLASSIFY, CHUNK_SHADOWS, MAX_UNION, PLANE_REL,
-                         RAY_TFAR_SHORT, WEIGHT_FLOOR_REL)
+from ._constants import (CHUNK_CELL_PAIRS, CHUNK_CLASSIFY, CHUNK_SHADOWS, MAX_UNION, MAX_UNION_CELLS,
+                         PLANE_REL, RAY_TFAR_SHORT, WEIGHT_FLOOR_REL)
 from ._exact import hidden_factors, point_factors
 from ._occluders import FREE, FULL, MAYBE, build_occluders
 
@@ -361,7 +361,7 @@ class Visibility:
             sub_starts, sub_occ = _subset_lists(starts, occ_sorted, np.arange(s, e))
             hidden[s:e], ok, n_points = cell_pairs(self.quads, self.normals, i[s:e], j[s:e], sub_starts, sub_occ,
                                                    o.polys, o.normal, o.center, o.inward, PLANE_REL * self.scale,
-                                                   MAX_UNION, float(rtol), int(max_points), gn, gw)
+                                                   MAX_UNION_CELLS, float(rtol), int(max_points), gn, gw)
             self.n_exact_rows += int(n_points.sum())
             bad.append(s + np.flatnonzero(~ok))
         bad = np.concatenate(bad)

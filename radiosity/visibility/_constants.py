@@ -33,6 +33,11 @@ CHUNK_SHADOWS = 100_000
 # pruned where intersections are empty); more go to shapely.
 MAX_UNION = 10
 
+# The same for the shadow-aligned cells, whose pairs fall back to fixed points past it: in a
+# room full of boxes a point sees the three faces of each of several boxes hide overlapping
+# parts of a source (the intersections across boxes are mostly empty and pruned).
+MAX_UNION_CELLS = 24
+
 # Kernel weights below this fraction of a pair's largest weight count as zero when deciding
 # whether a pair's rays agree (a sample on the receiver's horizon carries no light).
 WEIGHT_FLOOR_REL = 1e-12
