@@ -222,7 +222,7 @@ def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettin
                                             occ=occ[keep])
     if exact.any():
         stats.n_exact_pairs += int(exact.sum())
-        if settings.formfactor_rtol < SHADOW_CELLS_BELOW:
+        if settings.formfactor_rtol < SHADOW_CELLS_BELOW and settings.visibility_rtol < SHADOW_CELLS_BELOW:
             sel = np.flatnonzero(exact)
             where = np.full(len(part), -1)
             where[sel] = np.arange(len(sel))

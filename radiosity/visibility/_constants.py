@@ -50,8 +50,9 @@ CHUNK_CELL_PAIRS = 65_536
 SHADOW_RTOL_SHARE = 0.1
 
 
-# Fills whose formfactor_rtol is below this (view_factors' 1e-6, the fine preset) integrate
-# exact shadows over shadow-aligned receiver cells (``_cells_kernel``); cheaper ones (draft,
-# default) keep the fixed receiver points, which cost 9 points a pair where the cells cost
-# 16-200 (the Cornell box's default solve took 39 s instead of 17 s with the cells).
+# Fills whose formfactor_rtol and visibility_rtol are both below this (view_factors' 1e-6 and
+# 1e-6) integrate exact shadows over shadow-aligned receiver cells (``_cells_kernel``); the
+# presets (visibility_rtol 1e-3 to 1e-5) keep the fixed receiver points, which cost 9 points a
+# pair where the cells cost 16 to thousands (the Cornell box's default solve took 39 s instead
+# of 17 s with the cells at 16 points a pair; the fine preset was not measured with them).
 SHADOW_CELLS_BELOW = 1e-4
