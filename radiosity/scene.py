@@ -424,7 +424,10 @@ def bundled_scene(name: str = "cornell_box") -> Path:
             return candidate
     from importlib.resources import files
 
-    candidate = Path(str(files("radiosity.meshes") / f"{name}.obj"))
-    if candidate.exists():
+    try:  # installed: the meshes are the package radiosity.meshes
+        candidate = Path(str(files("radiosity.meshes") / f"{name}.obj"))
+    except ModuleNotFoundError:  # run from a source tree, where meshes/ sits beside the package
+        candidate = None
+    if candidate is not None and candidate.exists():
         return candidate
     raise SceneError(f"no bundled scene named {name!r}")
