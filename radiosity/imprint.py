@@ -206,9 +206,75 @@ def _footprint(segments: list[np.ndarray], tol: float):
     return shapely.unary_union(polys)
 
 
+class _Candidates:
+    """Which parts can touch a receiver, found without looking at all pairs.
+
+    A contact region of ``other`` on the receiver is either an overlap (``other``'s own box
+    meets the receiver's) or a footprint: a polygon closed by ``other``'s object's edges in the
+    receiver's plane, which may enclose the receiver without any of those edges meeting its box
+    (a tile under a bottomless block). Both lie inside the bounding box of ``other``'s object.
+    So the candidates are all parts of the objects whose box, padded by the tolerance, meets
+    the receiver's padded box, and of those only the parts whose box reaches the receiver's
+    plane (within the tolerance): a superset of the parts that ``_regions_of`` would keep from
+    all pairs, in the same order, so the regions are the same.
+    """
+
+    def __init__(self, parts: list[_Part], tol: float) -> None:
+        self.pad = 2.0 * tol  # twice: the projections onto the plane move points by up to tol
+        obj = np.array([p.obj for p in parts], dtype=np.int64)
+        self.lo = np.array([p.poly.min(axis=0) for p in parts]).reshape(-1, 3)
+        self.hi = np.array([p.poly.max(axis=0) for p in parts]).reshape(-1, 3)
+        self.objects, first = np.unique(obj, return_inverse=True)
+        order = np.argsort(first, kind="stable")  # parts of each object, in part order
+        counts = np.bincount(first, minlength=len(self.objects))
+        self.members = np.split(order, np.cumsum(counts)[:-1])
+        self.obj_lo = np.array([self.lo[m].min(axis=0) for m in self.members]).reshape(-1, 3)
+        self.obj_hi = np.array([self.hi[m].max(axis=0) for m in self.members]).reshape(-1, 3)
+
+    def of(self, receiver: _Part) -> tuple[np.ndarray, np.ndarray]:
+        """Indices (ascending) of the parts of the other objects near ``receiver``, and of those
+        that reach its plane (the first set is what may cover a footprint: a block's top)."""
+        box_lo = receiver.poly.min(axis=0) - self.pad
+        box_hi = receiver.poly.max(axis=0) + self.pad
+        meets = ~((self.obj_hi < box_lo).any(axis=1) | (self.obj_lo > box_hi).any(axis=1))
+        meets &= self.objects != receiver.obj
+        if not meets.any():
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        index = np.concatenate([self.members[k] for k in np.flatnonzero(meets)])
+        index.sort()
+        # the range of n . x over each part's box: does it reach the receiver's plane?
+        n = receiver.normal
+        centre = 0.5 * (self.lo[index] + self.hi[index]) - receiver.origin
+        half = 0.5 * (self.hi[index] - self.lo[index])
+        mid = centre @ n
+        reach = half @ np.abs(n)
+        return index, index[np.abs(mid) <= reach + self.pad]
+
+
+def _local(receiver: _Part, parts: list[_Part], candidates: _Candidates | None):
+    """The parts to test against ``receiver``, their points and point owners, and the parts
+    that may cover a footprint on it."""
+    if candidates is None:
+        chosen = covers = parts
+    else:
+        near, reaching = candidates.of(receiver)
+        chosen = [parts[i] for i in reaching]
+        covers = [parts[i] for i in near]
+    if not chosen:
+        return chosen, np.zeros((0, 3)), np.zeros(0, np.int64), covers
+    points = np.concatenate([p.poly for p in chosen])
+    owner = np.repeat(np.arange(len(chosen)), [len(p.poly) for p in chosen])
+    return chosen, points, owner, covers
+
+
 def _regions_of(receiver: _Part, parts: list[_Part], part_points: np.ndarray, part_of_point: np.ndarray,
-                scale: float) -> list[tuple[object, bool, str, int]]:
-    """Contact regions (shapely geometry in the receiver's frame, hidden, kind, object)."""
+                scale: float, cover_parts: list[_Part] | None = None) -> list[tuple[object, bool, str, int]]:
+    """Contact regions (shapely geometry in the receiver's frame, hidden, kind, object).
+
+    ``parts`` may be any subset of the parts that holds every part able to touch the receiver,
+    and ``cover_parts`` (default: ``parts``) any that holds every part able to cover a footprint
+    on it (:class:`_Candidates`), in their original order: the result does not depend on the others.
+    """
     import shapely
 
     tol = CONTACT_REL * scale
@@ -259,7 +325,8 @@ def _regions_of(receiver: _Part, parts: list[_Part], part_points: np.ndarray, pa
         region = shape.intersection(foot)
         if region.area <= SLIVER_AREA_REL * shape.area:
             continue
-        regions.append((region, _is_covered(region, receiver, parts, obj, tol), "footprint", obj))
+        covered = _is_covered(region, receiver, parts if cover_parts is None else cover_parts, obj, tol)
+        regions.append((region, covered, "footprint", obj))
     return regions
 
 
@@ -358,7 +425,7 @@ def _delaunay_pieces(polygon) -> list[np.ndarray]:
 
 
 def imprint_faces(vertices: np.ndarray, faces: list[np.ndarray], face_object: np.ndarray, *,
-                  scale: float | None = None) -> Imprinted:
+                  scale: float | None = None, _all_pairs: bool = False) -> Imprinted:
     """Cut faces along the outlines of other objects' faces that touch them.
 
     Parameters
@@ -372,6 +439,9 @@ def imprint_faces(vertices: np.ndarray, faces: list[np.ndarray], face_object: np
     scale : float, optional
         Length the contact tolerance is relative to (``CONTACT_REL``); default: the diagonal of
         the vertices' bounding box.
+    _all_pairs : bool
+        Test every part against every other (the old quadratic search), for tests and benches:
+        the default finds candidates by bounding boxes (:class:`_Candidates`), same result.
 
     Returns
     -------
@@ -393,15 +463,14 @@ def imprint_faces(vertices: np.ndarray, faces: list[np.ndarray], face_object: np
         used = vertices[np.unique(np.concatenate(faces))] if faces else vertices
         scale = float(np.linalg.norm(np.ptp(used, axis=0))) if len(used) else 1.0
     parts, deviations = _make_parts(vertices, faces, face_object)
-    if parts:
-        part_points = np.concatenate([p.poly for p in parts])
-        part_of_point = np.repeat(np.arange(len(parts)), [len(p.poly) for p in parts])
+    candidates = None if _all_pairs or not parts else _Candidates(parts, CONTACT_REL * scale)
     by_face: dict[int, list[tuple[_Part, list]]] = defaultdict(list)
     contacts: list[Contact] = []
     failed: set[int] = set()
     for part in parts:
         try:
-            regions = _regions_of(part, parts, part_points, part_of_point, scale)
+            local, part_points, part_of_point, covers = _local(part, parts, candidates)
+            regions = _regions_of(part, local, part_points, part_of_point, scale, covers) if local else []
         except _geos_error():  # a degenerate contact GEOS cannot overlay: leave the face uncut
             regions = []
             failed.add(part.face)
