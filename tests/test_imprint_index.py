@@ -111,3 +111,30 @@ def test_tile_inside_bottomless_footprint_is_found():
     cut = imprint_faces(vertices, faces, np.array([0] + [1] * 5), scale=4.0)
     assert cut.piece_hidden[cut.piece_face == 0].all()
     _same(vertices, faces, np.array([0] + [1] * 5))
+
+
+def test_cli_no_imprint_reaches_load_scene(monkeypatch):
+    """--no-imprint (shared by solve, viewfactors, exchange) loads with imprint=False."""
+    import argparse
+
+    from radiosity.cli import _common
+
+    seen = {}
+    monkeypatch.setattr(_common, "load_scene", lambda path, **options: seen.update(options))
+    parser = argparse.ArgumentParser()
+    _common.add_scene_args(parser, optional_scene=True)
+    _common.load(parser.parse_args(["--no-imprint"]))
+    assert seen["imprint"] is False
+    seen.clear()
+    _common.load(parser.parse_args([]))
+    assert seen.get("imprint", True) is True
+
+
+def test_no_imprint_scene_has_no_hidden_patches():
+    cornell = radiosity.bundled_scene("cornell_box")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", radiosity.RadiosityWarning)
+        on = radiosity.load_scene(cornell)
+        off = radiosity.load_scene(cornell, imprint=False)
+    assert on.patch_hidden.any() and not off.patch_hidden.any()
+    np.testing.assert_allclose(on.patch_area.sum(), off.patch_area.sum(), rtol=1e-12)
