@@ -131,11 +131,43 @@ class _Part:
         return self.origin + xy[:, :1] * self.u + xy[:, 1:2] * self.v
 
 
-def _make_parts(vertices: np.ndarray, faces: list[np.ndarray], face_object: np.ndarray
-                ) -> tuple[list[_Part], list[float]]:
+def _near_other_objects(vertices: np.ndarray, faces: list[np.ndarray], face_object: np.ndarray,
+                        pad: float) -> np.ndarray:
+    """(f,) bool: the faces of objects whose box, padded by ``pad``, meets another object's box.
+
+    The others can neither receive a contact nor give one (:class:`_Candidates` looks only at
+    objects whose box meets the receiver's), so they need no parts: a scene of one mesh, or
+    objects standing apart, costs nothing here.
+    """
+    if not faces:
+        return np.zeros(0, bool)
+    corners = np.concatenate(faces)
+    starts = np.cumsum([0] + [len(f) for f in faces[:-1]])
+    if (np.diff(np.append(starts, len(corners))) == 0).any():
+        return np.ones(len(faces), bool)  # an empty face: let the parts decide, as before
+    lo = np.minimum.reduceat(vertices[corners], starts, axis=0)
+    hi = np.maximum.reduceat(vertices[corners], starts, axis=0)
+    objects, which = np.unique(face_object, return_inverse=True)
+    obj_lo = np.full((len(objects), 3), np.inf)
+    obj_hi = np.full((len(objects), 3), -np.inf)
+    np.minimum.at(obj_lo, which, lo)
+    np.maximum.at(obj_hi, which, hi)
+    near = np.zeros(len(objects), bool)
+    for k in range(len(objects)):
+        meets = ~((obj_hi < obj_lo[k] - pad).any(axis=1) | (obj_lo > obj_hi[k] + pad).any(axis=1))
+        meets[k] = False
+        near[k] = meets.any()
+    return near[which]
+
+
+def _make_parts(vertices: np.ndarray, faces: list[np.ndarray], face_object: np.ndarray,
+                active: np.ndarray | None = None) -> tuple[list[_Part], list[float]]:
     parts: list[_Part] = []
     deviations: list[float] = []
     for index, face in enumerate(faces):
+        if active is not None and not active[index]:
+            deviations.append(0.0)
+            continue
         poly = vertices[face]
         size = float(np.ptp(poly, axis=0).max()) if len(poly) else 0.0
         newell = _newell(poly)
@@ -462,7 +494,9 @@ def imprint_faces(vertices: np.ndarray, faces: list[np.ndarray], face_object: np
     if scale is None:
         used = vertices[np.unique(np.concatenate(faces))] if faces else vertices
         scale = float(np.linalg.norm(np.ptp(used, axis=0))) if len(used) else 1.0
-    parts, deviations = _make_parts(vertices, faces, face_object)
+    active = np.ones(len(faces), bool) if _all_pairs else _near_other_objects(vertices, faces, face_object,
+                                                                              2.0 * CONTACT_REL * scale)
+    parts, deviations = _make_parts(vertices, faces, face_object, active)
     candidates = None if _all_pairs or not parts else _Candidates(parts, CONTACT_REL * scale)
     by_face: dict[int, list[tuple[_Part, list]]] = defaultdict(list)
     contacts: list[Contact] = []

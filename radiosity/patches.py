@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _tol
+from ._ngon import GRADED_MIN_CORNERS, graded_pieces
 from .quadrature import centroids_and_areas, triangulate
 
 __all__ = ["Patches", "subdivide_faces"]
@@ -232,6 +233,10 @@ def _pieces(poly: np.ndarray, size: float) -> tuple[list[np.ndarray], float]:
     unit = unit / np.linalg.norm(unit)
     if len(poly) == 4 and _is_convex(poly, unit):
         return [poly], 0.0
+    if len(poly) >= GRADED_MIN_CORNERS and _is_convex(poly, unit):
+        pieces = graded_pieces(poly, unit)  # earcut would fan out slivers from the corners
+        if pieces is not None:
+            return pieces, 0.0
     return list(triangulate(poly)), 0.0
 
 

@@ -138,3 +138,14 @@ def test_no_imprint_scene_has_no_hidden_patches():
         off = radiosity.load_scene(cornell, imprint=False)
     assert on.patch_hidden.any() and not off.patch_hidden.any()
     np.testing.assert_allclose(on.patch_area.sum(), off.patch_area.sum(), rtol=1e-12)
+
+
+def test_objects_apart_need_no_parts():
+    """Boxes standing apart: no contacts, every face whole, same as all pairs."""
+    rng = np.random.default_rng(3)
+    vertices, faces, face_object = _boxes(rng, 1, bottomless=False)
+    far = vertices.copy()
+    far[16:] += [10.0, 5.0, 10.0]  # the box leaves the floor's box
+    cut = imprint_faces(far, faces, face_object)
+    assert not cut.contacts and len(cut.pieces) == len(faces)
+    _same(far, faces, face_object)
