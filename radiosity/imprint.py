@@ -131,6 +131,38 @@ class _Part:
         return self.origin + xy[:, :1] * self.u + xy[:, 1:2] * self.v
 
 
+class _BoxIndex:
+    """Boxes (lo, hi) that meet a query box, without testing them all.
+
+    Boxes up to a few times the median size go in a k-d tree on their centres (a ball query
+    of the query's half diagonal plus the largest of them finds every candidate); the few
+    larger ones (a room's shell) are tested directly. The answer is then filtered exactly, so
+    it is the same set as testing every box.
+    """
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray) -> None:
+        from scipy.spatial import cKDTree
+
+        self.lo, self.hi = lo, hi
+        centre, radius = 0.5 * (lo + hi), 0.5 * np.linalg.norm(hi - lo, axis=1)
+        small = radius <= 4.0 * float(np.median(radius)) if len(radius) else np.zeros(0, bool)
+        self.small = np.flatnonzero(small)
+        self.large = np.flatnonzero(~small)
+        self.reach = float(radius[self.small].max()) if len(self.small) else 0.0
+        self.tree = cKDTree(centre[self.small]) if len(self.small) else None
+
+    def meeting(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Indices (ascending) of the boxes that meet the box (lo, hi)."""
+        found = [self.large]
+        if self.tree is not None:
+            centre, radius = 0.5 * (lo + hi), 0.5 * float(np.linalg.norm(hi - lo))
+            near = self.tree.query_ball_point(centre, radius + self.reach + 1e-12 * (1.0 + radius))
+            found.append(self.small[np.asarray(near, dtype=np.int64)])
+        index = np.sort(np.concatenate(found))
+        meets = ~((self.hi[index] < lo).any(axis=1) | (self.lo[index] > hi).any(axis=1))
+        return index[meets]
+
+
 def _near_other_objects(vertices: np.ndarray, faces: list[np.ndarray], face_object: np.ndarray,
                         pad: float) -> np.ndarray:
     """(f,) bool: the faces of objects whose box, padded by ``pad``, meets another object's box.
@@ -152,11 +184,9 @@ def _near_other_objects(vertices: np.ndarray, faces: list[np.ndarray], face_obje
     obj_hi = np.full((len(objects), 3), -np.inf)
     np.minimum.at(obj_lo, which, lo)
     np.maximum.at(obj_hi, which, hi)
-    near = np.zeros(len(objects), bool)
-    for k in range(len(objects)):
-        meets = ~((obj_hi < obj_lo[k] - pad).any(axis=1) | (obj_lo > obj_hi[k] + pad).any(axis=1))
-        meets[k] = False
-        near[k] = meets.any()
+    index = _BoxIndex(obj_lo, obj_hi)
+    near = np.array([len(index.meeting(obj_lo[k] - pad, obj_hi[k] + pad)) > 1 for k in range(len(objects))],
+                    dtype=bool)  # itself and another
     return near[which]
 
 
@@ -262,17 +292,18 @@ class _Candidates:
         self.members = np.split(order, np.cumsum(counts)[:-1])
         self.obj_lo = np.array([self.lo[m].min(axis=0) for m in self.members]).reshape(-1, 3)
         self.obj_hi = np.array([self.hi[m].max(axis=0) for m in self.members]).reshape(-1, 3)
+        self.index = _BoxIndex(self.obj_lo, self.obj_hi)
 
     def of(self, receiver: _Part) -> tuple[np.ndarray, np.ndarray]:
         """Indices (ascending) of the parts of the other objects near ``receiver``, and of those
         that reach its plane (the first set is what may cover a footprint: a block's top)."""
         box_lo = receiver.poly.min(axis=0) - self.pad
         box_hi = receiver.poly.max(axis=0) + self.pad
-        meets = ~((self.obj_hi < box_lo).any(axis=1) | (self.obj_lo > box_hi).any(axis=1))
-        meets &= self.objects != receiver.obj
-        if not meets.any():
+        meets = self.index.meeting(box_lo, box_hi)
+        meets = meets[self.objects[meets] != receiver.obj]
+        if not len(meets):
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
-        index = np.concatenate([self.members[k] for k in np.flatnonzero(meets)])
+        index = np.concatenate([self.members[k] for k in meets])
         index.sort()
         # the range of n . x over each part's box: does it reach the receiver's plane?
         n = receiver.normal
