@@ -182,17 +182,6 @@ def read_mtl(path: Path, referenced_from: str = "", notes: list[str] | None = No
     return materials
 
 
-def _plain_indices(tokens: list[str], n_vertices: int) -> list[int] | None:
-    """Zero-based indices of a face written as plain positive vertex numbers (``f 1 2 3``, the
-    common case, read without :func:`_face_index`'s per-token work), or None for anything else."""
-    if not all(t.isascii() and t.isdigit() for t in tokens):
-        return None
-    idx = [int(t) - 1 for t in tokens]
-    if min(idx) < 0 or max(idx) >= n_vertices:
-        return None
-    return idx
-
-
 def _face_index(token: str, n_vertices: int, where: str, face_number: int) -> int:
     head = token.split("/", 1)[0]
     try:
@@ -343,9 +332,7 @@ def read_obj(path) -> ObjData:
             face_number = len(faces) + 1
             if len(tokens) < 3:
                 raise SceneError(f"{where}: face {face_number} has {len(tokens)} vertices; a face needs at least 3")
-            idx = _plain_indices(tokens, len(vertices))
-            if idx is None:  # relative, v/vt/vn or bad references: the full rules and messages
-                idx = [_face_index(t, len(vertices), where, face_number) for t in tokens]
+            idx = [_face_index(t, len(vertices), where, face_number) for t in tokens]
             # Drop repeated consecutive corners (f 1 2 2 3, or two vertices at the same point):
             # they add zero-length edges. A face left with fewer than 3 has zero area.
             idx = [v for k, v in enumerate(idx) if v != idx[k - 1] and vertices[v] != vertices[idx[k - 1]]] or idx[:1]
