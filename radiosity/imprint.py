@@ -277,7 +277,8 @@ class _Candidates:
     (a tile under a bottomless block). Both lie inside the bounding box of ``other``'s object.
     So the candidates are all parts of the objects whose box, padded by the tolerance, meets
     the receiver's padded box, and of those only the parts whose box reaches the receiver's
-    plane (within the tolerance): a superset of the parts that ``_regions_of`` would keep from
+    plane (within the tolerance), less those lying flat in it whose own box misses the
+    receiver's (overlaps are only counted where boxes meet): a superset of the parts that ``_regions_of`` would keep from
     all pairs, in the same order, so the regions are the same.
     """
 
@@ -311,7 +312,12 @@ class _Candidates:
         half = 0.5 * (self.hi[index] - self.lo[index])
         mid = centre @ n
         reach = half @ np.abs(n)
-        return index, index[np.abs(mid) <= reach + self.pad]
+        reaching = np.abs(mid) <= reach + self.pad
+        # Parts lying well inside the plane's tolerance are overlaps, which count only where
+        # their own box meets the receiver's (a floor's far tiles under a box's bottom face).
+        flat = np.abs(mid) + reach <= 0.25 * self.pad
+        apart = (self.hi[index] < box_lo).any(axis=1) | (self.lo[index] > box_hi).any(axis=1)
+        return index, index[reaching & ~(flat & apart)]
 
 
 def _local(receiver: _Part, parts: list[_Part], candidates: _Candidates | None):
