@@ -131,11 +131,73 @@ class _Part:
         return self.origin + xy[:, :1] * self.u + xy[:, 1:2] * self.v
 
 
-def _make_parts(vertices: np.ndarray, faces: list[np.ndarray], face_object: np.ndarray
-                ) -> tuple[list[_Part], list[float]]:
+class _BoxIndex:
+    """Boxes (lo, hi) that meet a query box, without testing them all.
+
+    Boxes up to a few times the median size go in a k-d tree on their centres (a ball query
+    of the query's half diagonal plus the largest of them finds every candidate); the few
+    larger ones (a room's shell) are tested directly. The answer is then filtered exactly, so
+    it is the same set as testing every box.
+    """
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray) -> None:
+        from scipy.spatial import cKDTree
+
+        self.lo, self.hi = lo, hi
+        centre, radius = 0.5 * (lo + hi), 0.5 * np.linalg.norm(hi - lo, axis=1)
+        small = radius <= 4.0 * float(np.median(radius)) if len(radius) else np.zeros(0, bool)
+        self.small = np.flatnonzero(small)
+        self.large = np.flatnonzero(~small)
+        self.reach = float(radius[self.small].max()) if len(self.small) else 0.0
+        self.tree = cKDTree(centre[self.small]) if len(self.small) else None
+
+    def meeting(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Indices (ascending) of the boxes that meet the box (lo, hi)."""
+        found = [self.large]
+        if self.tree is not None:
+            centre, radius = 0.5 * (lo + hi), 0.5 * float(np.linalg.norm(hi - lo))
+            near = self.tree.query_ball_point(centre, radius + self.reach + 1e-12 * (1.0 + radius))
+            found.append(self.small[np.asarray(near, dtype=np.int64)])
+        index = np.sort(np.concatenate(found))
+        meets = ~((self.hi[index] < lo).any(axis=1) | (self.lo[index] > hi).any(axis=1))
+        return index[meets]
+
+
+def _near_other_objects(vertices: np.ndarray, faces: list[np.ndarray], face_object: np.ndarray,
+                        pad: float) -> np.ndarray:
+    """(f,) bool: the faces of objects whose box, padded by ``pad``, meets another object's box.
+
+    The others can neither receive a contact nor give one (:class:`_Candidates` looks only at
+    objects whose box meets the receiver's), so they need no parts: a scene of one mesh, or
+    objects standing apart, costs nothing here.
+    """
+    if not faces:
+        return np.zeros(0, bool)
+    corners = np.concatenate(faces)
+    starts = np.cumsum([0] + [len(f) for f in faces[:-1]])
+    if (np.diff(np.append(starts, len(corners))) == 0).any():
+        return np.ones(len(faces), bool)  # an empty face: let the parts decide, as before
+    lo = np.minimum.reduceat(vertices[corners], starts, axis=0)
+    hi = np.maximum.reduceat(vertices[corners], starts, axis=0)
+    objects, which = np.unique(face_object, return_inverse=True)
+    obj_lo = np.full((len(objects), 3), np.inf)
+    obj_hi = np.full((len(objects), 3), -np.inf)
+    np.minimum.at(obj_lo, which, lo)
+    np.maximum.at(obj_hi, which, hi)
+    index = _BoxIndex(obj_lo, obj_hi)
+    near = np.array([len(index.meeting(obj_lo[k] - pad, obj_hi[k] + pad)) > 1 for k in range(len(objects))],
+                    dtype=bool)  # itself and another
+    return near[which]
+
+
+def _make_parts(vertices: np.ndarray, faces: list[np.ndarray], face_object: np.ndarray,
+                active: np.ndarray | None = None) -> tuple[list[_Part], list[float]]:
     parts: list[_Part] = []
     deviations: list[float] = []
     for index, face in enumerate(faces):
+        if active is not None and not active[index]:
+            deviations.append(0.0)
+            continue
         poly = vertices[face]
         size = float(np.ptp(poly, axis=0).max()) if len(poly) else 0.0
         newell = _newell(poly)
@@ -206,9 +268,82 @@ def _footprint(segments: list[np.ndarray], tol: float):
     return shapely.unary_union(polys)
 
 
+class _Candidates:
+    """Which parts can touch a receiver, found without looking at all pairs.
+
+    A contact region of ``other`` on the receiver is either an overlap (``other``'s own box
+    meets the receiver's) or a footprint: a polygon closed by ``other``'s object's edges in the
+    receiver's plane, which may enclose the receiver without any of those edges meeting its box
+    (a tile under a bottomless block). Both lie inside the bounding box of ``other``'s object.
+    So the candidates are all parts of the objects whose box, padded by the tolerance, meets
+    the receiver's padded box, and of those only the parts whose box reaches the receiver's
+    plane (within the tolerance), less those lying flat in it whose own box misses the
+    receiver's (overlaps are only counted where boxes meet): a superset of the parts that ``_regions_of`` would keep from
+    all pairs, in the same order, so the regions are the same.
+    """
+
+    def __init__(self, parts: list[_Part], tol: float) -> None:
+        self.pad = 2.0 * tol  # twice: the projections onto the plane move points by up to tol
+        obj = np.array([p.obj for p in parts], dtype=np.int64)
+        self.lo = np.array([p.poly.min(axis=0) for p in parts]).reshape(-1, 3)
+        self.hi = np.array([p.poly.max(axis=0) for p in parts]).reshape(-1, 3)
+        self.objects, first = np.unique(obj, return_inverse=True)
+        order = np.argsort(first, kind="stable")  # parts of each object, in part order
+        counts = np.bincount(first, minlength=len(self.objects))
+        self.members = np.split(order, np.cumsum(counts)[:-1])
+        self.obj_lo = np.array([self.lo[m].min(axis=0) for m in self.members]).reshape(-1, 3)
+        self.obj_hi = np.array([self.hi[m].max(axis=0) for m in self.members]).reshape(-1, 3)
+        self.index = _BoxIndex(self.obj_lo, self.obj_hi)
+
+    def of(self, receiver: _Part) -> tuple[np.ndarray, np.ndarray]:
+        """Indices (ascending) of the parts of the other objects near ``receiver``, and of those
+        that reach its plane (the first set is what may cover a footprint: a block's top)."""
+        box_lo = receiver.poly.min(axis=0) - self.pad
+        box_hi = receiver.poly.max(axis=0) + self.pad
+        meets = self.index.meeting(box_lo, box_hi)
+        meets = meets[self.objects[meets] != receiver.obj]
+        if not len(meets):
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        index = np.concatenate([self.members[k] for k in meets])
+        index.sort()
+        # the range of n . x over each part's box: does it reach the receiver's plane?
+        n = receiver.normal
+        centre = 0.5 * (self.lo[index] + self.hi[index]) - receiver.origin
+        half = 0.5 * (self.hi[index] - self.lo[index])
+        mid = centre @ n
+        reach = half @ np.abs(n)
+        reaching = np.abs(mid) <= reach + self.pad
+        # Parts lying well inside the plane's tolerance are overlaps, which count only where
+        # their own box meets the receiver's (a floor's far tiles under a box's bottom face).
+        flat = np.abs(mid) + reach <= 0.25 * self.pad
+        apart = (self.hi[index] < box_lo).any(axis=1) | (self.lo[index] > box_hi).any(axis=1)
+        return index, index[reaching & ~(flat & apart)]
+
+
+def _local(receiver: _Part, parts: list[_Part], candidates: _Candidates | None):
+    """The parts to test against ``receiver``, their points and point owners, and the parts
+    that may cover a footprint on it."""
+    if candidates is None:
+        chosen = covers = parts
+    else:
+        near, reaching = candidates.of(receiver)
+        chosen = [parts[i] for i in reaching]
+        covers = [parts[i] for i in near]
+    if not chosen:
+        return chosen, np.zeros((0, 3)), np.zeros(0, np.int64), covers
+    points = np.concatenate([p.poly for p in chosen])
+    owner = np.repeat(np.arange(len(chosen)), [len(p.poly) for p in chosen])
+    return chosen, points, owner, covers
+
+
 def _regions_of(receiver: _Part, parts: list[_Part], part_points: np.ndarray, part_of_point: np.ndarray,
-                scale: float) -> list[tuple[object, bool, str, int]]:
-    """Contact regions (shapely geometry in the receiver's frame, hidden, kind, object)."""
+                scale: float, cover_parts: list[_Part] | None = None) -> list[tuple[object, bool, str, int]]:
+    """Contact regions (shapely geometry in the receiver's frame, hidden, kind, object).
+
+    ``parts`` may be any subset of the parts that holds every part able to touch the receiver,
+    and ``cover_parts`` (default: ``parts``) any that holds every part able to cover a footprint
+    on it (:class:`_Candidates`), in their original order: the result does not depend on the others.
+    """
     import shapely
 
     tol = CONTACT_REL * scale
@@ -259,7 +394,8 @@ def _regions_of(receiver: _Part, parts: list[_Part], part_points: np.ndarray, pa
         region = shape.intersection(foot)
         if region.area <= SLIVER_AREA_REL * shape.area:
             continue
-        regions.append((region, _is_covered(region, receiver, parts, obj, tol), "footprint", obj))
+        covered = _is_covered(region, receiver, parts if cover_parts is None else cover_parts, obj, tol)
+        regions.append((region, covered, "footprint", obj))
     return regions
 
 
@@ -358,7 +494,7 @@ def _delaunay_pieces(polygon) -> list[np.ndarray]:
 
 
 def imprint_faces(vertices: np.ndarray, faces: list[np.ndarray], face_object: np.ndarray, *,
-                  scale: float | None = None) -> Imprinted:
+                  scale: float | None = None, _all_pairs: bool = False) -> Imprinted:
     """Cut faces along the outlines of other objects' faces that touch them.
 
     Parameters
@@ -372,6 +508,9 @@ def imprint_faces(vertices: np.ndarray, faces: list[np.ndarray], face_object: np
     scale : float, optional
         Length the contact tolerance is relative to (``CONTACT_REL``); default: the diagonal of
         the vertices' bounding box.
+    _all_pairs : bool
+        Test every part against every other (the old quadratic search), for tests and benches:
+        the default finds candidates by bounding boxes (:class:`_Candidates`), same result.
 
     Returns
     -------
@@ -392,16 +531,17 @@ def imprint_faces(vertices: np.ndarray, faces: list[np.ndarray], face_object: np
     if scale is None:
         used = vertices[np.unique(np.concatenate(faces))] if faces else vertices
         scale = float(np.linalg.norm(np.ptp(used, axis=0))) if len(used) else 1.0
-    parts, deviations = _make_parts(vertices, faces, face_object)
-    if parts:
-        part_points = np.concatenate([p.poly for p in parts])
-        part_of_point = np.repeat(np.arange(len(parts)), [len(p.poly) for p in parts])
+    active = np.ones(len(faces), bool) if _all_pairs else _near_other_objects(vertices, faces, face_object,
+                                                                              2.0 * CONTACT_REL * scale)
+    parts, deviations = _make_parts(vertices, faces, face_object, active)
+    candidates = None if _all_pairs or not parts else _Candidates(parts, CONTACT_REL * scale)
     by_face: dict[int, list[tuple[_Part, list]]] = defaultdict(list)
     contacts: list[Contact] = []
     failed: set[int] = set()
     for part in parts:
         try:
-            regions = _regions_of(part, parts, part_points, part_of_point, scale)
+            local, part_points, part_of_point, covers = _local(part, parts, candidates)
+            regions = _regions_of(part, local, part_points, part_of_point, scale, covers) if local else []
         except _geos_error():  # a degenerate contact GEOS cannot overlay: leave the face uncut
             regions = []
             failed.add(part.face)

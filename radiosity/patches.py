@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _tol
+from ._ngon import GRADED_MIN_CORNERS, graded_pieces
 from .quadrature import centroids_and_areas, triangulate
 
 __all__ = ["Patches", "subdivide_faces"]
@@ -45,8 +46,44 @@ class FaceReport:
 
 
 def _newell(poly: np.ndarray) -> np.ndarray:
-    centred = poly - poly.mean(axis=0)
-    return 0.5 * np.cross(centred, np.roll(centred, -1, axis=0)).sum(axis=0)
+    """Area vector (Newell): half the sum of cross products of consecutive centred corners.
+
+    Written out rather than with ``np.cross`` / ``np.roll``, whose per-call overhead dominated
+    loading large scenes (it is called a few times per face); the same products and
+    differences in the same order, so the same bits.
+    """
+    if len(poly) <= 8:
+        return _newell_small(poly)
+    a = poly - poly.mean(axis=0)
+    b = np.concatenate([a[1:], a[:1]])
+    cross = np.empty_like(a)
+    cross[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    cross[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    cross[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return 0.5 * cross.sum(axis=0)
+
+
+def _newell_small(poly: np.ndarray) -> np.ndarray:
+    """:func:`_newell` in Python floats for a few corners (numpy's per-call cost is most of it
+    there): numpy reduces axis 0 row after row, so these sums run in the same order."""
+    rows = poly.tolist()
+    k = len(rows)
+    mx, my, mz = rows[0]
+    for x, y, z in rows[1:]:
+        mx += x
+        my += y
+        mz += z
+    mx, my, mz = mx / k, my / k, mz / k
+    a = [(x - mx, y - my, z - mz) for x, y, z in rows]
+    (ax, ay, az), (bx, by, bz) = a[0], a[1]
+    sx, sy, sz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+    for i in range(1, k):
+        ax, ay, az = a[i]
+        bx, by, bz = a[(i + 1) % k]
+        sx += ay * bz - az * by
+        sy += az * bx - ax * bz
+        sz += ax * by - ay * bx
+    return np.array([0.5 * sx, 0.5 * sy, 0.5 * sz])
 
 
 def _is_convex(poly: np.ndarray, normal: np.ndarray) -> bool:
@@ -196,6 +233,10 @@ def _pieces(poly: np.ndarray, size: float) -> tuple[list[np.ndarray], float]:
     unit = unit / np.linalg.norm(unit)
     if len(poly) == 4 and _is_convex(poly, unit):
         return [poly], 0.0
+    if len(poly) >= GRADED_MIN_CORNERS and _is_convex(poly, unit):
+        pieces = graded_pieces(poly, unit)  # earcut would fan out slivers from the corners
+        if pieces is not None:
+            return pieces, 0.0
     return list(triangulate(poly)), 0.0
 
 

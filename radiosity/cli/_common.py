@@ -35,6 +35,9 @@ def add_scene_args(parser: argparse.ArgumentParser, *, optional_scene: bool) -> 
                         help="read Ke as radiance (E = pi Ke) or as exitance")
     parser.add_argument("--allow-clamp", action="store_true", help="clamp reflectances >= 1 instead of refusing")
     parser.add_argument("--no-cache", action="store_true", help="do not read or write the form-factor cache")
+    parser.add_argument("--no-imprint", action="store_true",
+                        help="do not cut faces along the outlines of other objects touching them (contacts "
+                             "then get no sharp light/dark edge and covered parts are not hidden)")
 
 
 def add_camera_arg(parser: argparse.ArgumentParser) -> None:
@@ -58,6 +61,8 @@ def camera_text(text: str) -> str:
 def load(args):
     path = args.scene if args.scene is not None else bundled_scene("cornell_box")
     options = {"allow_clamp": args.allow_clamp}
+    if getattr(args, "no_imprint", False):
+        options["imprint"] = False
     if args.units is not None:
         options["units"] = args.units
     return load_scene(path, emission=args.emission, **options)
