@@ -276,11 +276,11 @@ def check_cut(quads: np.ndarray, max_patch_size: float, *, budget: int | None = 
 BYTES_PER_BLOCK_PAIR = 400
 
 # Bytes per patch held for the whole out-of-core fill: the patch arrays, the occluders and their
-# bounding-volume hierarchy, the facing mask of a block's rows (one byte per (row, patch)).
-BYTES_PER_FILL_PATCH = 4096
+# bounding-volume hierarchy (a block's facing mask, a byte per (row, patch), is per pair).
+BYTES_PER_FILL_PATCH = 1024
 
 # Fewest pairs (i, j > i) per block worth a task: below this, per-block overheads dominate.
-MIN_BLOCK_PAIRS = 10_000
+MIN_BLOCK_PAIRS = 1_000
 
 
 def plan_fill_block(n_patches: int, *, budget: int | None = None, max_pairs: int | None = None) -> int:
@@ -296,7 +296,7 @@ def plan_fill_block(n_patches: int, *, budget: int | None = None, max_pairs: int
     >>> plan_fill_block(18_000, budget=4 << 30)
     1000000
     >>> plan_fill_block(18_000, budget=200 << 20)
-    84992
+    119552
     """
     from .assembly import FILL_PAIRS
 
