@@ -33,6 +33,10 @@ __all__ = ["FillProblem", "blocks_of", "run_blocks", "fill_matrix", "cluster_cli
 _WORKER_VISIBILITY: dict[str, object] = {}
 # Problems a worker keeps structures for at once (a long-lived cluster serves many scenes).
 _WORKER_KEEP = 2
+# Blocks per worker when a cluster fill plans its blocks (a few, so a slow block or a lost
+# worker does not leave the others idle), and the fewest pairs worth a task.
+TASKS_PER_WORKER = 4
+MIN_TASK_PAIRS = 2_000
 
 
 @dataclass(frozen=True, eq=False)
@@ -136,13 +140,26 @@ def run_blocks(problem: FillProblem, blocks: list[tuple[int, int]], *, client=No
         future.release()
 
 
+def cluster_block_pairs(n: int, client=None, pairs_per_block: int = FILL_PAIRS // 2) -> int:
+    """Pairs per block on ``client``'s cluster: no more than ``pairs_per_block``, and small enough
+    that every worker gets about ``TASKS_PER_WORKER`` blocks (a one-block fill would use one)."""
+    if client is None:
+        return pairs_per_block
+    workers = max(1, len(client.scheduler_info().get("workers", {})))
+    total = n * (n - 1) // 2
+    return int(max(MIN_TASK_PAIRS, min(pairs_per_block, total // (TASKS_PER_WORKER * workers) + 1)))
+
+
 def fill_matrix(problem: FillProblem, *, client=None, progress: Callable[[int], None] | None = None,
-                pairs_per_block: int = FILL_PAIRS // 2) -> tuple[sp.csr_matrix, FillStats]:
+                pairs_per_block: int | None = None) -> tuple[sp.csr_matrix, FillStats]:
     """The sparse F of ``problem`` and its statistics, in process or on ``client``'s cluster.
 
     ``progress(rows)`` is called as each block completes. The blocks are put together in row
-    order, so the result is the in-process fill's, bit for bit.
+    order; a block's factors do not depend on the blocking, so the result is the in-process
+    fill's, bit for bit. ``pairs_per_block`` default: :func:`cluster_block_pairs`.
     """
+    if pairs_per_block is None:
+        pairs_per_block = cluster_block_pairs(problem.n, client)
     blocks = blocks_of(problem.n, pairs_per_block)
     parts: list = [None] * len(blocks)
     stats = FillStats()

@@ -61,6 +61,15 @@ def test_two_workers_give_the_local_matrix_bit_for_bit(client, problem, local):
     assert sum(done) == problem.n  # progress counted every row once
 
 
+def test_the_blocking_does_not_change_the_bits(client, problem):
+    """The cluster's own block plan (a few tasks per worker) against one in-process block."""
+    one_block = assemble(problem.quads, problem.normals, problem.centroid, problem.area, problem.visibility(),
+                         problem.settings, active=problem.active, pairs_per_block=10**9)[0]
+    assert cluster.cluster_block_pairs(problem.n, client) < problem.n ** 2 // 2
+    F, _ = cluster.fill_matrix(problem, client=client)
+    assert same_bits(F, one_block)
+
+
 def test_each_worker_builds_visibility_once(client, problem):
     cluster.fill_matrix(problem, client=client, pairs_per_block=PAIRS)
     built = client.run(lambda: list(cluster._WORKER_VISIBILITY))
@@ -101,3 +110,18 @@ def test_bad_worker_counts_are_refused():
     with pytest.raises(ValueError, match="not both"):
         with cluster.cluster_client(workers=1, scheduler="tcp://127.0.0.1:1"):
             pass
+
+
+def test_cli_scheduler(client, tmp_path, capsys):
+    """``radiosity viewfactors --scheduler ADDRESS``: the same F.npz matrix as the in-process CLI."""
+    import scipy.sparse as sp
+
+    from radiosity.cli import main
+
+    obj = str(radiosity.bundled_scene("unit_cube"))
+    assert main(["viewfactors", obj, "--max-patch-size", "0.5", "--no-cache", "-o", str(tmp_path / "a.npz")]) == 0
+    assert main(["viewfactors", obj, "--max-patch-size", "0.5", "--no-cache", "-o", str(tmp_path / "b.npz"),
+                 "--scheduler", client.scheduler.address]) == 0
+    assert same_bits(sp.load_npz(tmp_path / "a.npz"), sp.load_npz(tmp_path / "b.npz"))
+    assert main(["viewfactors", obj, "-o", str(tmp_path / "c.npz"), "--workers", "0"]) == 2
+    capsys.readouterr()
