@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import os
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
@@ -174,7 +175,8 @@ def fill_matrix(problem: FillProblem, *, client=None, progress: Callable[[int], 
 @contextlib.contextmanager
 def cluster_client(workers: int | None = None, scheduler: str | None = None):
     """A ``distributed.Client``: to the cluster at ``scheduler``, or to a new local cluster of
-    ``workers`` processes (one thread each; numba uses the cores of its process), closed on exit.
+    ``workers`` processes (one Dask thread each; numba's loops get cores / workers threads each),
+    closed on exit.
     Yields None when neither is given (the in-process fill)."""
     if workers is None and scheduler is None:
         yield None
@@ -191,6 +193,9 @@ def cluster_client(workers: int | None = None, scheduler: str | None = None):
         with Client(scheduler) as client:
             yield client
         return
-    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
-            Client(cluster) as client:
+    # numba's parallel loops take every core in each process: split the cores between the
+    # workers instead of running N x cores threads (unless the user set NUMBA_NUM_THREADS).
+    threads = os.environ.get("NUMBA_NUM_THREADS") or str(max(1, (os.cpu_count() or 1) // workers))
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                      env={"NUMBA_NUM_THREADS": threads}) as cluster, Client(cluster) as client:
         yield client
