@@ -37,7 +37,7 @@ _WORKER_KEEP = 2
 # Blocks per worker when a cluster fill plans its blocks (a few, so a slow block or a lost
 # worker does not leave the others idle), and the fewest pairs worth a task.
 TASKS_PER_WORKER = 4
-MIN_TASK_PAIRS = 2_000
+MIN_TASK_PAIRS = 20_000
 
 
 @dataclass(frozen=True, eq=False)
