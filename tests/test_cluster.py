@@ -71,9 +71,12 @@ def test_the_blocking_does_not_change_the_bits(client, problem):
 
 
 def test_each_worker_builds_visibility_once(client, problem):
+    """Visibility structures are cached per worker by the problem's key: one entry per worker
+    that ran a block, however many blocks it ran."""
     cluster.fill_matrix(problem, client=client, pairs_per_block=PAIRS)
     built = client.run(lambda: list(cluster._WORKER_VISIBILITY))
-    assert all(keys == [problem.key] for keys in built.values())
+    assert all(keys in ([], [problem.key]) for keys in built.values())
+    assert any(built.values())
 
 
 def test_a_block_lost_with_its_worker_is_run_again(client, problem, local):
