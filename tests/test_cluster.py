@@ -95,6 +95,7 @@ def test_a_block_lost_with_its_worker_is_run_again(client, problem, local):
     from radiosity.assembly import coo_parts_to_csr
 
     assert all(p is not None for p in parts)
+    assert pids[0] not in client.run(os.getpid).values()  # the worker did die mid-run
     assert same_bits(coo_parts_to_csr(parts, problem.n), F_local)
 
 
