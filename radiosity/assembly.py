@@ -184,6 +184,7 @@ def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettin
     classified once for both.
     """
     from .visibility import FULL, MAYBE
+    from .visibility._constants import MAX_CELL_OCCLUDERS, SHADOW_CELLS_BELOW, SHADOW_RTOL_SHARE
 
     nz = np.flatnonzero(f > 0)
     if half is None:
@@ -221,7 +222,22 @@ def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettin
                                             occ=occ[keep])
     if exact.any():
         stats.n_exact_pairs += int(exact.sum())
-        # the same receiver points as the unoccluded factor, so F = sum_q w_q F_visible(x_q)
+        tight = settings.formfactor_rtol < SHADOW_CELLS_BELOW and settings.visibility_rtol < SHADOW_CELLS_BELOW
+        cells = exact & (np.bincount(local[rows], minlength=len(part)) <= MAX_CELL_OCCLUDERS) if tight else None
+        if cells is not None and cells.any():
+            sel = np.flatnonzero(cells)
+            where = np.full(len(part), -1)
+            where[sel] = np.arange(len(sel))
+            keep = where[local[rows]] >= 0
+            # the hidden part over receiver cells cut along the shadow's edges: F = F_unoccluded - hidden
+            unocc = f[nz[part[sel]]]
+            hidden = visibility.exact_hidden(pi[sel], pj[sel], where[local[rows[keep]]], occ[keep],
+                                             SHADOW_RTOL_SHARE * settings.formfactor_rtol, unocc,
+                                             fallback_order=max(settings.near_order, 8))
+            seen = np.clip(unocc - hidden, 0.0, unocc)
+            frac[sel] = np.where(unocc > 0, seen / np.where(unocc > 0, unocc, 1.0), 1.0)
+            exact = exact & ~cells
+        # the rest: the same receiver points as the unoccluded factor, F = sum_q w_q F_visible(x_q)
         near = _is_near(quads, centroid, pi, pj, settings)
         for mask, order in ((exact & near, settings.near_order), (exact & ~near, 1)):
             if not mask.any():

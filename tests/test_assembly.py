@@ -180,13 +180,18 @@ def test_fill_settings_validate():
 
 
 @pytest.mark.parametrize("mode", ["exact", "rays"])
-def test_fill_classifies_each_pair_once_for_both_directions(mode):
-    """assemble classifies (i, j) and (j, i) together; every entry is still f_ij x fraction(i, j)."""
+def test_fill_classifies_each_pair_once_for_both_directions(mode, monkeypatch):
+    """assemble classifies (i, j) and (j, i) together; every entry is still f_ij x fraction(i, j)
+    (rays) or f_ij - hidden(i, j) (exact shadows over shadow-aligned cells)."""
     from test_visibility import boxes_scene
+
+    import radiosity.visibility._constants as constants
+
+    monkeypatch.setattr(constants, "MAX_CELL_OCCLUDERS", 10**9)  # every exact pair over cells here
 
     quads, groups = boxes_scene()
     settings = FillSettings(near_order=3, far_separation=1e9, visibility=mode, visibility_samples=2,
-                            visibility_max_samples=4)
+                            visibility_max_samples=4, visibility_rtol=1e-6)  # exact: the cells
     normals = polygon_normals(quads)
     centroid, area = centroids_and_areas(quads)
     vis = Visibility(quads, normals, groups, 1.8, samples=2, max_samples=4)
@@ -198,7 +203,20 @@ def test_fill_classifies_each_pair_once_for_both_directions(mode):
 
     f = unoccluded_factors(quads, normals, centroid, area, i, j, settings)
     fresh = Visibility(quads, normals, groups, 1.8, samples=2, max_samples=4)
-    expected = f * fresh.fraction(i, j, exact=mode == "exact", order=3)
+    if mode == "exact":
+        from radiosity.visibility import MAYBE
+        from radiosity.visibility._constants import SHADOW_RTOL_SHARE
+
+        status, rows, occ = fresh.classify(i, j)
+        expected = np.where(status == 1, 0.0, f)
+        part = np.flatnonzero(status == MAYBE)
+        local = np.full(len(i), -1)
+        local[part] = np.arange(len(part))
+        hidden = fresh.exact_hidden(i[part], j[part], local[rows], occ, SHADOW_RTOL_SHARE * settings.formfactor_rtol,
+                                    f[part], fallback_order=8)
+        expected[part] = np.clip(f[part] - hidden, 0.0, f[part])
+    else:
+        expected = f * fresh.fraction(i, j)
     np.testing.assert_allclose(F.toarray()[i, j], np.where(expected > 1e-12, expected, 0.0), rtol=1e-12, atol=1e-15)
     assert F.nnz == np.count_nonzero(expected > 1e-12)
 
@@ -245,3 +263,26 @@ def test_facing_pairs_loop_matches_numpy():
         assembly._facing_numpy(quads, normals, offset, scale, rows, ref)
         assert ref.any() and not ref.all()
         np.testing.assert_array_equal(got, ref)
+
+
+def test_pairs_behind_many_occluders_keep_the_fixed_points(monkeypatch):
+    """The cells serve pairs with at most MAX_CELL_OCCLUDERS possible occluders; past that (a room
+    full of boxes, where the cells cost minutes) the fill is the fixed-point one, entry for entry."""
+    from test_visibility import boxes_scene
+
+    import radiosity.visibility._constants as constants
+
+    quads, groups = boxes_scene()
+    normals = polygon_normals(quads)
+    centroid, area = centroids_and_areas(quads)
+    tight = FillSettings(near_order=3, far_separation=1e9, visibility="exact", visibility_samples=2,
+                         visibility_max_samples=4, visibility_rtol=1e-6, formfactor_rtol=1e-6)
+    loose = FillSettings(near_order=3, far_separation=1e9, visibility="exact", visibility_samples=2,
+                         visibility_max_samples=4, visibility_rtol=1e-3, formfactor_rtol=1e-6)
+
+    def fill(settings):
+        vis = Visibility(quads, normals, groups, 1.8, samples=2, max_samples=4)
+        return assemble(quads, normals, centroid, area, vis, settings)[0].toarray()
+
+    monkeypatch.setattr(constants, "MAX_CELL_OCCLUDERS", 0)  # no pair qualifies for the cells
+    np.testing.assert_array_equal(fill(tight), fill(loose))

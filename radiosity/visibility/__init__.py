@@ -31,8 +31,8 @@ from scipy.spatial import ConvexHull, QhullError
 from .. import _tol
 from ..quadrature import patch_points
 from . import _occluders
-from ._constants import (CHUNK_CLASSIFY, CHUNK_SHADOWS, MAX_UNION, PLANE_REL, RAY_TFAR_SHORT,
-                         WEIGHT_FLOOR_REL)
+from ._constants import (CHUNK_CELL_PAIRS, CHUNK_CLASSIFY, CHUNK_SHADOWS, MAX_UNION, MAX_UNION_CELLS,
+                         PLANE_REL, RAY_TFAR_SHORT, WEIGHT_FLOOR_REL)
 from ._exact import hidden_factors, point_factors
 from ._occluders import FREE, FULL, MAYBE, build_occluders
 
@@ -51,6 +51,12 @@ def occluder_mask(quads: np.ndarray, scale: float) -> np.ndarray:
     dist = np.einsum("fc,nkc->nkf", planes[:, :3], quads) + planes[None, None, :, 3]
     on_facet_plane = (np.abs(dist) <= tol).all(axis=1).any(axis=1)
     return ~on_facet_plane
+
+
+def _gauss_table():
+    from ._cells_kernel import gauss_table
+
+    return gauss_table(8)
 
 
 def _hash_uniform(key: np.ndarray) -> np.ndarray:
@@ -340,6 +346,46 @@ class Visibility:
             lost = (hidden * w[i[s:e]]).sum(axis=1)
             out[s:e] = np.where(total > 0, 1.0 - lost / np.where(total > 0, total, 1.0), 1.0)
         return out
+
+    def exact_hidden(self, i: np.ndarray, j: np.ndarray, rows: np.ndarray, occ: np.ndarray, rtol: float,
+                     unoccluded: np.ndarray, fallback_order: int = 3, max_points: int = 4096) -> np.ndarray:
+        """(m,) hidden part of partly occluded pairs, integrated over shadow-aligned receiver cells.
+
+        The mean over receiver i (its part in front of j's plane) of F(x -> part of j hidden
+        from x): the pair's obstructed factor is ``unoccluded - hidden``. The receiver is cut
+        along the lines where the hidden polygon changes shape (``_cells_kernel``), so each
+        cell's integrand is smooth and its Gauss rule (picked for ``rtol``, within about
+        ``max_points`` receiver points a pair) converges. Pairs
+        whose lines, cells or unions ran out fall back to :meth:`exact_fraction` at
+        ``fallback_order**2`` points, scaled by ``unoccluded`` (m,), the pairs' factors.
+        """
+        from ._cells_kernel import cell_pairs
+
+        i = np.ascontiguousarray(i, dtype=np.int64)
+        j = np.ascontiguousarray(j, dtype=np.int64)
+        hidden = np.zeros(len(i))
+        if not len(i):
+            return hidden
+        starts, occ_sorted = _occluder_lists(rows, occ, len(i))
+        gn, gw = _gauss_table()
+        o = self.occluders
+        bad = []
+        for s in range(0, len(i), CHUNK_CELL_PAIRS):
+            e = min(len(i), s + CHUNK_CELL_PAIRS)
+            sub_starts, sub_occ = _subset_lists(starts, occ_sorted, np.arange(s, e))
+            hidden[s:e], ok, n_points = cell_pairs(self.quads, self.normals, i[s:e], j[s:e], sub_starts, sub_occ,
+                                                   o.polys, o.normal, o.center, o.inward, PLANE_REL * self.scale,
+                                                   MAX_UNION_CELLS, float(rtol), int(max_points), gn, gw)
+            self.n_exact_rows += int(n_points.sum())
+            bad.append(s + np.flatnonzero(~ok))
+        bad = np.concatenate(bad)
+        if len(bad):
+            local = np.full(len(i), -1)
+            local[bad] = np.arange(len(bad))
+            keep = local[rows] >= 0
+            frac = self.exact_fraction(i[bad], j[bad], local[rows[keep]], occ[keep], fallback_order)
+            hidden[bad] = np.asarray(unoccluded)[bad] * (1.0 - frac)
+        return hidden
 
     def _hidden_at(self, pts, i, j, starts, occ, where):
         """Hidden form factors at the receiver points where the kernel left them (shapely unions)."""

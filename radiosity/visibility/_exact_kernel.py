@@ -404,8 +404,14 @@ def _exact_block(s, e, pts, normals, quads, i, j, starts, occ, opolys, onormal, 
         src = quads[j[p]]
         sn = normals[j[p]]
         nxp = normals[i[p]]
+        off = 0.0
+        for k in range(ns):
+            off += sn[0] * src[k, 0] + sn[1] * src[k, 1] + sn[2] * src[k, 2]
+        off /= ns
         for qa in range(q):
             xq = pts[i[p], qa]
+            if sn[0] * xq[0] + sn[1] * xq[1] + sn[2] * xq[2] - off <= tol:
+                continue  # behind the source's plane: it sees the source's back, which gives nothing
             unocc[p, qa] = _lambert(xq, nxp, src, ns, s2)
             hidden[p, qa], ok[p, qa] = _point_hidden(xq, nxp, src, sn, occ, starts[p], starts[p + 1], opolys,
                                                      onormal, tol, max_union, a, b, s1, s2, hp, hn, levels,

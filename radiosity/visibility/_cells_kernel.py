@@ -1,0 +1,524 @@
+"""numba kernel: the hidden part of a partly occluded pair, integrated over shadow-aligned cells.
+
+For a receiver point x the hidden form factor F(x -> hidden(x)) (``_exact_kernel._point_hidden``)
+is continuous in x, but its derivative jumps where the hidden polygon changes shape: where x
+crosses a plane through a source vertex and an occluder edge, through an occluder vertex and a
+source edge, through a vertex of one occluder and an edge of another, or an occluder's own
+plane. A Gauss rule across such a kink converges only at first order (the blocked plates
+with a plate cut 3 x 3 erred by 1e-2), so each receiver is cut along these lines first:
+
+1. the receiver, in its plane, is clipped to the source's front half-space (points behind it
+   see the source's back, which gives nothing: the fill's one-sided rule, as in
+   ``quadrature.pair_factors``);
+2. every event line whose event actually happens on the receiver (the central projection of
+   the edge through the vertex meets it) cuts the convex cells into convex cells;
+3. each cell is fanned into triangles; a triangle close to a source or occluder edge compared
+   with its size is split in four (graded towards edges and corners), and the others take the
+   Gauss order that the a-priori bound ``(distance / size)**(-2 p)`` says meets the tolerance.
+
+Inside a cell the integrand is smooth (up to events involving three edges of two occluders,
+which the grading resolves only at a lower rate), so the hidden factor converges spectrally.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from ._exact_kernel import _classify_one, _lambert, _point_hidden
+
+# Event lines one pair may cut its receiver by, and the cells they may make.
+MAX_LINES = 128
+MAX_CELLS = 256
+# Vertices a cell may have (a convex polygon cut by lines gains at most one per cut).
+_CELL_VERTICES = 72
+# Triangles (pending and done) and depth of the grading.
+MAX_TRIANGLES = 2048
+MAX_DEPTH = 7
+_ORDERS = (1, 2, 3, 4, 5, 6, 8)
+
+
+def gauss_table(max_order: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """(max_order + 1, max_order) Gauss-Legendre nodes and weights on [0, 1]; row p: order p."""
+    nodes = np.zeros((max_order + 1, max_order))
+    weights = np.zeros((max_order + 1, max_order))
+    for p in range(1, max_order + 1):
+        x, w = np.polynomial.legendre.leggauss(p)
+        nodes[p, :p] = 0.5 * (x + 1.0)
+        weights[p, :p] = 0.5 * w
+    return nodes, weights
+
+
+@njit(cache=True, inline="always")
+def _clip2(src, n, dst, a, b, c, eps):
+    """Keep a u + b w + c >= 0 of the convex 2-D polygon src[:n] (into dst); returns the count."""
+    m = 0
+    for k in range(n):
+        k2 = k + 1 if k + 1 < n else 0
+        h1 = a * src[k, 0] + b * src[k, 1] + c
+        h2 = a * src[k2, 0] + b * src[k2, 1] + c
+        if abs(h1) <= eps:
+            h1 = 0.0
+        if abs(h2) <= eps:
+            h2 = 0.0
+        if h1 >= 0.0:
+            dst[m, 0] = src[k, 0]
+            dst[m, 1] = src[k, 1]
+            m += 1
+        if (h1 > 0.0 and h2 < 0.0) or (h1 < 0.0 and h2 > 0.0):
+            t = h1 / (h1 - h2)
+            dst[m, 0] = src[k, 0] + t * (src[k2, 0] - src[k, 0])
+            dst[m, 1] = src[k, 1] + t * (src[k2, 1] - src[k, 1])
+            m += 1
+    return m
+
+
+@njit(cache=True, inline="always")
+def _polygon_area2(poly, n):
+    s = 0.0
+    for k in range(n):
+        k2 = k + 1 if k + 1 < n else 0
+        s += poly[k, 0] * poly[k2, 1] - poly[k2, 0] * poly[k, 1]
+    return 0.5 * s
+
+
+@njit(cache=True, inline="always")
+def _to_plane(px, py, pz, o, e1, e2):
+    return ((px - o[0]) * e1[0] + (py - o[1]) * e1[1] + (pz - o[2]) * e1[2],
+            (px - o[0]) * e2[0] + (py - o[1]) * e2[1] + (pz - o[2]) * e2[2])
+
+
+@njit(cache=True, inline="always")
+def _project(fx, fy, fz, nx_, ny_, nz_, n, d):
+    """Where the ray from F through N meets the plane n . x = d beyond N: (ok, x, y, z)."""
+    dx, dy, dz = nx_ - fx, ny_ - fy, nz_ - fz
+    den = n[0] * dx + n[1] * dy + n[2] * dz
+    if den == 0.0:
+        return False, 0.0, 0.0, 0.0
+    t = (d - (n[0] * fx + n[1] * fy + n[2] * fz)) / den
+    if not t > 1.0:
+        return False, 0.0, 0.0, 0.0
+    return True, fx + t * dx, fy + t * dy, fz + t * dz
+
+
+@njit(cache=True)
+def _segment_meets(poly, n, ax, ay, bx, by, eps):
+    """Whether the 2-D segment a-b meets the convex counter-clockwise polygon poly[:n]."""
+    t0, t1 = 0.0, 1.0
+    for k in range(n):
+        k2 = k + 1 if k + 1 < n else 0
+        ex, ey = poly[k2, 0] - poly[k, 0], poly[k2, 1] - poly[k, 1]
+        # inward normal of a counter-clockwise edge
+        gx, gy = -ey, ex
+        ha = gx * (ax - poly[k, 0]) + gy * (ay - poly[k, 1])
+        hb = gx * (bx - poly[k, 0]) + gy * (by - poly[k, 1])
+        if ha < -eps and hb < -eps:
+            return False
+        if ha < -eps or hb < -eps:
+            t = ha / (ha - hb)
+            if ha < hb:
+                t0 = max(t0, t)
+            else:
+                t1 = min(t1, t)
+            if t0 > t1:
+                return False
+    return True
+
+
+@njit(cache=True)
+def _add_line(lines, n_lines, mx, my, mz, qx, qy, qz, o, e1, e2, dom, nd, eps):
+    """Append the trace on the receiver plane of the plane (normal m, through q) if it crosses
+    the domain dom[:nd]; returns the new line count."""
+    a = mx * e1[0] + my * e1[1] + mz * e1[2]
+    b = mx * e2[0] + my * e2[1] + mz * e2[2]
+    s = math.sqrt(a * a + b * b)
+    if n_lines >= lines.shape[0] or s <= 1e-9 * math.sqrt(mx * mx + my * my + mz * mz):
+        return n_lines
+    a /= s
+    b /= s
+    c = (mx * (o[0] - qx) + my * (o[1] - qy) + mz * (o[2] - qz)) / s
+    lo, hi = 0.0, 0.0
+    for k in range(nd):
+        h = a * dom[k, 0] + b * dom[k, 1] + c
+        lo = min(lo, h)
+        hi = max(hi, h)
+    if not (lo < -eps and hi > eps):
+        return n_lines
+    for t in range(n_lines):  # the same line twice cuts nothing new
+        if abs(lines[t, 0] - a) + abs(lines[t, 1] - b) + abs(lines[t, 2] - c) <= eps:
+            return n_lines
+        if abs(lines[t, 0] + a) + abs(lines[t, 1] + b) + abs(lines[t, 2] + c) <= eps:
+            return n_lines
+    lines[n_lines, 0] = a
+    lines[n_lines, 1] = b
+    lines[n_lines, 2] = c
+    return n_lines + 1
+
+
+@njit(cache=True)
+def _event_line(lines, n_lines, seg_is_far, sa, sb, pt, nrm, d, o, e1, e2, dom, nd, eps):
+    """Line of the events 'the segment sa-sb and the point pt line up with x' on the receiver.
+
+    ``seg_is_far``: the segment is the far element (a source edge seen past an occluder vertex)
+    or the near one (an occluder edge in front of a source vertex). The event happens on the
+    receiver only where the central projection of the segment through (or from) the point
+    meets it; a line whose projection misses the domain is skipped.
+    """
+    ex, ey, ez = sb[0] - sa[0], sb[1] - sa[1], sb[2] - sa[2]
+    fx, fy, fz = sa[0] - pt[0], sa[1] - pt[1], sa[2] - pt[2]
+    mx, my, mz = ey * fz - ez * fy, ez * fx - ex * fz, ex * fy - ey * fx
+    if mx * mx + my * my + mz * mz <= 1e-24 * (ex * ex + ey * ey + ez * ez) * (fx * fx + fy * fy + fz * fz):
+        return n_lines  # the point lies on the segment's line
+    if seg_is_far:
+        ok0, x0, y0, z0 = _project(sa[0], sa[1], sa[2], pt[0], pt[1], pt[2], nrm, d)
+        ok1, x1, y1, z1 = _project(sb[0], sb[1], sb[2], pt[0], pt[1], pt[2], nrm, d)
+    else:
+        ok0, x0, y0, z0 = _project(pt[0], pt[1], pt[2], sa[0], sa[1], sa[2], nrm, d)
+        ok1, x1, y1, z1 = _project(pt[0], pt[1], pt[2], sb[0], sb[1], sb[2], nrm, d)
+    if not (ok0 or ok1):
+        return n_lines
+    if ok0 and ok1:
+        u0, w0 = _to_plane(x0, y0, z0, o, e1, e2)
+        u1, w1 = _to_plane(x1, y1, z1, o, e1, e2)
+        if not _segment_meets(dom, nd, u0, w0, u1, w1, eps):
+            return n_lines
+    return _add_line(lines, n_lines, mx, my, mz, pt[0], pt[1], pt[2], o, e1, e2, dom, nd, eps)
+
+
+@njit(cache=True, inline="always")
+def _segment_distance(px, py, pz, a, b):
+    ex, ey, ez = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    rx, ry, rz = px - a[0], py - a[1], pz - a[2]
+    l2 = ex * ex + ey * ey + ez * ez
+    t = 0.0 if l2 == 0.0 else min(1.0, max(0.0, (rx * ex + ry * ey + rz * ez) / l2))
+    dx, dy, dz = rx - t * ex, ry - t * ey, rz - t * ez
+    return math.sqrt(dx * dx + dy * dy + dz * dz)
+
+
+@njit(cache=True)
+def _pair_hidden(rec, nr, src, sn, occ, t0, t1, opolys, onormal, ocenter, oinward, tol, max_union, rtol, max_points,
+                 gn, gw, work, work2):
+    """Mean over the receiver (its part in front of the source) of the hidden form factor.
+
+    Returns (hidden, ok, points); ok is False where a point needed shapely (more than
+    max_union hidden polygons) or the lines, cells or triangles ran out.
+    """
+    (a, b, s1, s2, hp, hn, levels, lcount, nxt, sa, sb, lines, cells, ccount, tmp, tris, tdepth, segs) = work
+    (tri3, locc, pocc, si, sj, outside, valid, gi, gj) = work2
+    ms = opolys.shape[1]
+    ns = src.shape[0]
+    # receiver plane frame
+    ox = (rec[0, 0] + rec[1, 0] + rec[2, 0] + rec[3, 0]) / 4.0
+    oy = (rec[0, 1] + rec[1, 1] + rec[2, 1] + rec[3, 1]) / 4.0
+    oz = (rec[0, 2] + rec[1, 2] + rec[2, 2] + rec[3, 2]) / 4.0
+    o = np.array((ox, oy, oz))
+    if abs(nr[0]) < 0.9:
+        hx, hy, hz = 1.0, 0.0, 0.0
+    else:
+        hx, hy, hz = 0.0, 1.0, 0.0
+    e1 = np.array((nr[1] * hz - nr[2] * hy, nr[2] * hx - nr[0] * hz, nr[0] * hy - nr[1] * hx))
+    e1 /= math.sqrt(e1[0] ** 2 + e1[1] ** 2 + e1[2] ** 2)
+    e2 = np.array((nr[1] * e1[2] - nr[2] * e1[1], nr[2] * e1[0] - nr[0] * e1[2], nr[0] * e1[1] - nr[1] * e1[0]))
+    d = nr[0] * ox + nr[1] * oy + nr[2] * oz
+    # receiver in 2-D, repeated vertices dropped, counter-clockwise about nr
+    nd = 0
+    dom = cells[0]
+    size = 0.0
+    for k in range(4):
+        u, w = _to_plane(rec[k, 0], rec[k, 1], rec[k, 2], o, e1, e2)
+        if nd > 0 and abs(u - dom[nd - 1, 0]) + abs(w - dom[nd - 1, 1]) <= 0.0:
+            continue
+        dom[nd, 0] = u
+        dom[nd, 1] = w
+        nd += 1
+        size = max(size, abs(u) + abs(w))
+    if nd > 1 and dom[nd - 1, 0] == dom[0, 0] and dom[nd - 1, 1] == dom[0, 1]:
+        nd -= 1
+    area = _polygon_area2(dom, nd)
+    if nd < 3 or area == 0.0:
+        return 0.0, True, 0
+    if area < 0.0:
+        for k in range(nd // 2):
+            for c in range(2):
+                dom[k, c], dom[nd - 1 - k, c] = dom[nd - 1 - k, c], dom[k, c]
+        area = -area
+    eps = 1e-12 * size
+    # 1. the front of the source's plane
+    scx = (src[0, 0] + src[1, 0] + src[2, 0] + src[3, 0]) / 4.0
+    scy = (src[0, 1] + src[1, 1] + src[2, 1] + src[3, 1]) / 4.0
+    scz = (src[0, 2] + src[1, 2] + src[2, 2] + src[3, 2]) / 4.0
+    fa = sn[0] * e1[0] + sn[1] * e1[1] + sn[2] * e1[2]
+    fb = sn[0] * e2[0] + sn[1] * e2[1] + sn[2] * e2[2]
+    fc = sn[0] * (ox - scx) + sn[1] * (oy - scy) + sn[2] * (oz - scz)
+    nd = _clip2(dom, nd, tmp, fa, fb, fc, 1e-12 * (size + abs(fc)))
+    if nd < 3:
+        return 0.0, True, 0
+    for k in range(nd):
+        dom[k, 0] = tmp[k, 0]
+        dom[k, 1] = tmp[k, 1]
+    # 2. occluders with a part in front of both planes (one entirely on or behind the
+    # receiver's plane, or the source's, touches no segment that carries light), event lines
+    n_occ = 0
+    for t in range(t0, t1):
+        K = opolys[occ[t]]
+        hr = -np.inf
+        hs = -np.inf
+        for v in range(ms):
+            hr = max(hr, nr[0] * K[v, 0] + nr[1] * K[v, 1] + nr[2] * K[v, 2] - d)
+            hs = max(hs, sn[0] * (K[v, 0] - scx) + sn[1] * (K[v, 1] - scy) + sn[2] * (K[v, 2] - scz))
+        if hr > tol and hs > tol:
+            pocc[n_occ] = occ[t]
+            n_occ += 1
+    if n_occ == 0:
+        return 0.0, True, 0
+    n_lines = 0
+    for t in range(n_occ):
+        kk = pocc[t]
+        K = opolys[kk]
+        kn = onormal[kk]
+        n_lines = _add_line(lines, n_lines, kn[0], kn[1], kn[2], K[0, 0], K[0, 1], K[0, 2], o, e1, e2, dom, nd, eps)
+        for v in range(ms):
+            v2 = v + 1 if v + 1 < ms else 0
+            for s in range(ns):
+                s2i = s + 1 if s + 1 < ns else 0
+                # occluder edge in front of a source vertex
+                n_lines = _event_line(lines, n_lines, False, K[v], K[v2], src[s], nr, d, o, e1, e2, dom, nd, eps)
+                # source edge seen past an occluder vertex
+                n_lines = _event_line(lines, n_lines, True, src[s], src[s2i], K[v], nr, d, o, e1, e2, dom, nd, eps)
+        if 2 <= n_occ and n_occ * n_occ * ms <= max_points:  # lines between occluders, if affordable
+            for t2 in range(n_occ):
+                if t2 == t:
+                    continue
+                K2 = opolys[pocc[t2]]
+                for v in range(ms):
+                    for e in range(ms):
+                        e2i = e + 1 if e + 1 < ms else 0
+                        ex = K2[e2i, 0] - K2[e, 0]
+                        ey = K2[e2i, 1] - K2[e, 1]
+                        ez = K2[e2i, 2] - K2[e, 2]
+                        fx = K2[e, 0] - K[v, 0]
+                        fy = K2[e, 1] - K[v, 1]
+                        fz = K2[e, 2] - K[v, 2]
+                        n_lines = _add_line(lines, n_lines, ey * fz - ez * fy, ez * fx - ex * fz, ex * fy - ey * fx,
+                                            K[v, 0], K[v, 1], K[v, 2], o, e1, e2, dom, nd, eps)
+    ok = n_lines < lines.shape[0]
+    # 3. cut the domain into convex cells
+    n_cells = 1
+    ccount[0] = nd
+    for t in range(n_lines):
+        la, lb, lc = lines[t, 0], lines[t, 1], lines[t, 2]
+        for c in range(n_cells):
+            nc = ccount[c]
+            lo, hi = 0.0, 0.0
+            for k in range(nc):
+                h = la * cells[c, k, 0] + lb * cells[c, k, 1] + lc
+                lo = min(lo, h)
+                hi = max(hi, h)
+            if not (lo < -eps and hi > eps):
+                continue
+            if n_cells >= cells.shape[0] or nc + 2 > cells.shape[1]:
+                ok = False
+                continue
+            m2 = _clip2(cells[c], nc, cells[n_cells], -la, -lb, -lc, eps)
+            m1 = _clip2(cells[c], nc, tmp, la, lb, lc, eps)
+            if m1 >= 3 and m2 >= 3:
+                for k in range(m1):
+                    cells[c, k, 0] = tmp[k, 0]
+                    cells[c, k, 1] = tmp[k, 1]
+                ccount[c] = m1
+                ccount[n_cells] = m2
+                n_cells += 1
+    # singular segments: edges of the source and the occluders, but not those lying in the
+    # receiver's plane (the hidden polygon's cone through such an edge is the receiver's plane
+    # itself, whatever x; and a hidden part next to x means an occluder edge next to x)
+    n_segs = 0
+    for s in range(ns):
+        s2i = s + 1 if s + 1 < ns else 0
+        h1 = nr[0] * src[s, 0] + nr[1] * src[s, 1] + nr[2] * src[s, 2] - d
+        h2 = nr[0] * src[s2i, 0] + nr[1] * src[s2i, 1] + nr[2] * src[s2i, 2] - d
+        if abs(h1) <= tol and abs(h2) <= tol:
+            continue
+        for c in range(3):
+            segs[n_segs, 0, c] = src[s, c]
+            segs[n_segs, 1, c] = src[s2i, c]
+        n_segs += 1
+    # 4. triangles, graded towards those segments, each with its a-priori Gauss order
+    n_tris = 0
+    for c in range(n_cells):
+        for k in range(1, ccount[c] - 1):
+            if n_tris >= tris.shape[0]:
+                ok = False
+                break
+            for cc in range(2):
+                tris[n_tris, 0, cc] = cells[c, 0, cc]
+                tris[n_tris, 1, cc] = cells[c, k, cc]
+                tris[n_tris, 2, cc] = cells[c, k + 1, cc]
+            tdepth[n_tris] = 0
+            n_tris += 1
+    hidden = 0.0
+    done = 0
+    x = np.empty(3)
+    while n_tris > 0:
+        n_tris -= 1
+        t = n_tris
+        u0, w0 = tris[t, 0, 0], tris[t, 0, 1]
+        u1, w1 = tris[t, 1, 0], tris[t, 1, 1]
+        u2, w2 = tris[t, 2, 0], tris[t, 2, 1]
+        dep = tdepth[t]
+        tarea = 0.5 * abs((u1 - u0) * (w2 - w0) - (u2 - u0) * (w1 - w0))
+        if tarea <= 0.0:
+            continue
+        for k in range(3):
+            uu, ww = tris[t, k, 0], tris[t, k, 1]
+            for c in range(3):
+                tri3[k, c] = o[c] + uu * e1[c] + ww * e2[c]
+        for c in range(3):
+            tri3[3, c] = tri3[2, c]
+        # the occluders that may hide part of the source from this triangle (exact test); a
+        # triangle that none can is lit (hidden 0), one that some occluder covers is dark
+        n_local = 0
+        full = False
+        for tt in range(n_occ):
+            state = _classify_one(tri3, src, opolys, onormal, ocenter, oinward, pocc[tt], tol, si, sj, outside,
+                                  valid, gi, gj)
+            if state == 1:
+                full = True
+                break
+            if state == 2:
+                locc[n_local] = pocc[tt]
+                n_local += 1
+        if not full and n_local == 0:
+            continue
+        cu, cw = (u0 + u1 + u2) / 3.0, (w0 + w1 + w2) / 3.0
+        rad = max(math.hypot(u0 - cu, w0 - cw), math.hypot(u1 - cu, w1 - cw), math.hypot(u2 - cu, w2 - cw))
+        px = ox + cu * e1[0] + cw * e2[0]
+        py = oy + cu * e1[1] + cw * e2[1]
+        pz = oz + cu * e1[2] + cw * e2[2]
+        dist = np.inf
+        for s in range(n_segs):
+            dist = min(dist, _segment_distance(px, py, pz, segs[s, 0], segs[s, 1]))
+        if not full:
+            for tt in range(n_local):
+                K = opolys[locc[tt]]
+                for v in range(ms):
+                    v2 = v + 1 if v + 1 < ms else 0
+                    h1 = nr[0] * K[v, 0] + nr[1] * K[v, 1] + nr[2] * K[v, 2] - d
+                    h2 = nr[0] * K[v2, 0] + nr[1] * K[v2, 1] + nr[2] * K[v2, 2] - d
+                    if abs(h1) <= tol and abs(h2) <= tol:
+                        continue
+                    dist = min(dist, _segment_distance(px, py, pz, K[v], K[v2]))
+        rho = dist / rad
+        # the a-priori bound (distance / size)**(-2 p), weighted by the triangle's share of the
+        # receiver: small triangles (the grading's) need low orders
+        share = 0.5 * tarea / area
+        p = 0
+        if rho > 1.0:
+            for q in _ORDERS:
+                if share * rho ** (-2.0 * q) <= rtol:
+                    p = q
+                    break
+        elif share <= rtol:
+            p = 2
+        # the budget: no split once pending triangles would take it, and orders shrink to share it
+        room = max_points - done
+        if p == 0 and dep < MAX_DEPTH and n_tris + 4 <= tris.shape[0] and room > 4 * (n_tris + 4):
+            m01u, m01w = 0.5 * (u0 + u1), 0.5 * (w0 + w1)
+            m12u, m12w = 0.5 * (u1 + u2), 0.5 * (w1 + w2)
+            m20u, m20w = 0.5 * (u2 + u0), 0.5 * (w2 + w0)
+            for (au, aw, bu, bw, du, dw) in ((u0, w0, m01u, m01w, m20u, m20w), (m01u, m01w, u1, w1, m12u, m12w),
+                                             (m20u, m20w, m12u, m12w, u2, w2), (m12u, m12w, m20u, m20w, m01u, m01w)):
+                tris[n_tris, 0, 0] = au
+                tris[n_tris, 0, 1] = aw
+                tris[n_tris, 1, 0] = bu
+                tris[n_tris, 1, 1] = bw
+                tris[n_tris, 2, 0] = du
+                tris[n_tris, 2, 1] = dw
+                tdepth[n_tris] = dep + 1
+                n_tris += 1
+            continue
+        if p == 0:
+            p = _ORDERS[len(_ORDERS) - 1]
+        while p > 1 and p * p * (n_tris + 1) > room:
+            p -= 1
+        done += p * p
+        # collapsed-square Gauss rule on the triangle (vertex 0 is the collapsed one)
+        for ia in range(p):
+            sa_ = gn[p, ia]
+            for ib in range(p):
+                tb = gn[p, ib]
+                wq = 2.0 * tarea * sa_ * gw[p, ia] * gw[p, ib]
+                uu = u0 + sa_ * (u1 - u0) + sa_ * tb * (u2 - u1)
+                ww = w0 + sa_ * (w1 - w0) + sa_ * tb * (w2 - w1)
+                x[0] = ox + uu * e1[0] + ww * e2[0]
+                x[1] = oy + uu * e1[1] + ww * e2[1]
+                x[2] = oz + uu * e1[2] + ww * e2[2]
+                if full:
+                    f_h = _lambert(x, nr, src, ns, s2)
+                else:
+                    f_h, good = _point_hidden(x, nr, src, sn, locc, 0, n_local, opolys, onormal, tol, max_union, a,
+                                              b, s1, s2, hp, hn, levels, lcount, nxt, sa, sb)
+                    if not good:
+                        ok = False
+                hidden += wq * f_h
+    return hidden / area, ok, done
+
+
+_PAIR_BLOCK = 16
+
+
+@njit(cache=True)
+def _cells_block(s, e, quads, normals, i, j, starts, occ, opolys, onormal, ocenter, oinward, tol, max_union, rtol,
+                 max_points, gn, gw, hidden, ok, n_points):
+    ms = opolys.shape[1]
+    ns = quads.shape[1]
+    cap = ns + ms + 3
+    lcap = 2 * (max_union + 1) * cap + 8
+    work = (np.empty((ms + 3, 3)), np.empty((ms + 3, 3)), np.empty((cap, 3)), np.empty((cap, 3)),
+            np.empty((max_union, cap, 3)), np.empty(max_union, np.int64), np.empty((max_union + 1, lcap, 3)),
+            np.empty(max_union + 1, np.int64), np.empty(max_union + 1, np.int64), np.empty((lcap + 2, 3)),
+            np.empty((lcap + 2, 3)), np.empty((MAX_LINES, 3)), np.empty((MAX_CELLS, _CELL_VERTICES, 2)),
+            np.empty(MAX_CELLS, np.int64), np.empty((_CELL_VERTICES, 2)), np.empty((MAX_TRIANGLES, 3, 2)),
+            np.empty(MAX_TRIANGLES, np.int64), np.empty((ns, 2, 3)))
+    most = 1
+    for p in range(s, e):
+        most = max(most, starts[p + 1] - starts[p])
+    work2 = (np.empty((4, 3)), np.empty(most, np.int64), np.empty(most, np.int64), np.empty(4), np.empty(4), np.zeros(ms, np.bool_),
+             np.zeros(ms, np.bool_), np.empty((4, ms)), np.empty((4, ms)))
+    for p in range(s, e):
+        hidden[p], ok[p], n_points[p] = _pair_hidden(quads[i[p]], normals[i[p]], quads[j[p]], normals[j[p]], occ,
+                                                     starts[p], starts[p + 1], opolys, onormal, ocenter, oinward,
+                                                     tol, max_union, rtol, max_points, gn, gw, work, work2)
+
+
+@njit(cache=True, parallel=True)
+def cell_pairs(quads, normals, i, j, starts, occ, opolys, onormal, ocenter, oinward, tol, max_union, rtol, max_points,
+               gn, gw):
+    """Hidden form factors of partly occluded pairs, integrated over shadow-aligned cells.
+
+    Pair p (receiver i[p], source j[p], both rows of ``quads``) may be blocked by
+    ``opolys[occ[starts[p]:starts[p + 1]]]`` (an ``Occluders``' polys, normal, center, inward).
+    Gauss orders aim at ``rtol``; a pair evaluates at most about ``max_points`` points (the
+    grading stops and the orders shrink to fit).
+
+    Returns
+    -------
+    hidden : (m,) float
+        Mean over receiver i of F(x -> the part of j hidden from x), over x in front of j's
+        plane (points behind it see j's back: nothing).
+    ok : (m,) bool
+        False where the lines, cells, triangles or the compiled union ran out (the caller falls
+        back to fixed points).
+    points : (m,) int
+        Receiver points evaluated.
+    """
+    m = i.shape[0]
+    hidden = np.zeros(m)
+    ok = np.ones(m, np.bool_)
+    n_points = np.zeros(m, np.int64)
+    n_blocks = (m + _PAIR_BLOCK - 1) // _PAIR_BLOCK
+    for blk in prange(n_blocks):
+        _cells_block(blk * _PAIR_BLOCK, min(m, (blk + 1) * _PAIR_BLOCK), quads, normals, i, j, starts, occ, opolys,
+                     onormal, ocenter, oinward, tol, max_union, rtol, max_points, gn, gw, hidden, ok, n_points)
+    return hidden, ok, n_points
