@@ -28,7 +28,7 @@ def client():
 @pytest.fixture(scope="module")
 def problem():
     scene = radiosity.load_scene(radiosity.bundled_scene("cornell_box"), max_patch_size=0.12)
-    settings = FillSettings(visibility="auto", visibility_rtol=1e-4, formfactor_rtol=1e-5)
+    settings = FillSettings(visibility="auto", visibility_rtol=1e-4, formfactor_rtol=1e-5)  # cheap: no shadow cells
     active = np.ones(scene.n_patches, bool)
     active[::17] = False  # inactive patches are left out of F, and still block
     return cluster.FillProblem.from_scene(scene, settings, active)
