@@ -10,6 +10,8 @@ bundled_scene       -- path of a scene shipped with the package ("cornell_box", 
 solve               -- radiosity solution of a scene (Solution), with presets
 view_factors        -- sparse patch-to-patch view-factor matrix with occlusion
 compute_view_factors -- the same with the patches it belongs to, sky factors, sums (ViewFactors)
+write_view_factors  -- the same written out of core, block by block, into a shard folder
+load_view_factors   -- a matrix written out of core, read lazily (shape, rows, F @ x, solve)
 exchange            -- grey-body radiative exchange (net radiation method): Exchange
 Scene, Solution, Exchange, Options, PRESETS, ViewFactors
 RadiosityError, SceneError, MemoryBudgetError, RadiosityWarning
@@ -29,7 +31,8 @@ with guard_imports():  # Ctrl-C during these seconds of imports: one line and ex
     from .options import PRESETS, Options
     from .scene import Scene, bundled_scene, load_scene
     from .solution import Solution
-    from .solve import compute_view_factors, solve, view_factors
+    from .shards import load_view_factors
+    from .solve import compute_view_factors, solve, view_factors, write_view_factors
 
 try:
     __version__ = _version("radiosity")
@@ -45,6 +48,8 @@ __all__ = [
     "solve",
     "view_factors",
     "compute_view_factors",
+    "write_view_factors",
+    "load_view_factors",
     "ViewFactors",
     "exchange",
     "Exchange",

@@ -22,7 +22,7 @@ from . import _tol
 from ._errors import MemoryBudgetError
 
 __all__ = ["ENV_BUDGET", "budget_bytes", "check", "check_fill", "check_solve", "check_rays", "check_patches",
-           "check_cut", "patch_bound", "fill_bytes", "solve_bytes", "format_bytes"]
+           "check_cut", "patch_bound", "fill_bytes", "solve_bytes", "format_bytes", "plan_fill_block"]
 
 ENV_BUDGET = "RADIOSITY_MEMORY_BUDGET"
 
@@ -268,3 +268,44 @@ def check_cut(quads: np.ndarray, max_patch_size: float, *, budget: int | None = 
           n * BYTES_PER_PATCH, "use a larger max_patch_size (--max-patch-size) or a coarser preset (--preset draft)",
           budget=budget)
     return n
+
+
+# Bytes per directed pair in flight in one fill block: form-factor quadrature temporaries,
+# visibility classification and occluder lists, and the block's (i, j, v) output (see
+# assembly.FILL_PAIRS, whose 2M directed pairs per block are a few hundred MB).
+BYTES_PER_BLOCK_PAIR = 400
+
+# Bytes per patch held for the whole out-of-core fill: the patch arrays, the occluders and their
+# bounding-volume hierarchy (a block's facing mask, a byte per (row, patch), is per pair).
+BYTES_PER_FILL_PATCH = 1024
+
+# Fewest pairs (i, j > i) per block worth a task: below this, per-block overheads dominate.
+MIN_BLOCK_PAIRS = 1_000
+
+
+def plan_fill_block(n_patches: int, *, budget: int | None = None, max_pairs: int | None = None) -> int:
+    """Pairs (i, j > i) per block of an out-of-core fill of ``n_patches``, from the budget.
+
+    Only one block is in memory at a time (it is written to its shard, then freed), so the
+    fill needs the scene's structures plus one block: the block is the largest that fits in
+    half of what is left (the other half is headroom for the allocator and numba's threads).
+    Raises ``MemoryBudgetError`` when not even a small block fits.
+
+    Examples
+    --------
+    >>> plan_fill_block(18_000, budget=4 << 30)
+    1000000
+    >>> plan_fill_block(18_000, budget=200 << 20)
+    119552
+    """
+    from .assembly import FILL_PAIRS
+
+    if budget is None:
+        budget = budget_bytes()[0]
+    max_pairs = FILL_PAIRS // 2 if max_pairs is None else max_pairs
+    spare = budget - int(n_patches) * BYTES_PER_FILL_PATCH
+    pairs = spare // 2 // (2 * BYTES_PER_BLOCK_PAIR)
+    if pairs < MIN_BLOCK_PAIRS:
+        need = int(n_patches) * BYTES_PER_FILL_PATCH + 4 * BYTES_PER_BLOCK_PAIR * MIN_BLOCK_PAIRS
+        check(f"the out-of-core view-factor fill of {n_patches:,} patches", need, _COARSER, budget=budget)
+    return int(min(max_pairs, max(pairs, MIN_BLOCK_PAIRS)))

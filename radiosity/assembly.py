@@ -18,7 +18,7 @@ from . import _tol
 from .formfactors import lambert_pairs
 from .quadrature import pair_factors, patch_points
 
-__all__ = ["FillSettings", "FillStats", "candidate_pairs", "unoccluded_factors", "assemble"]
+__all__ = ["FillSettings", "FillStats", "candidate_pairs", "unoccluded_factors", "fill_block", "assemble"]
 
 
 VISIBILITY_MODES = ("auto", "rays", "exact")
@@ -258,12 +258,64 @@ def _row_blocks(n: int, pairs_per_block: int) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
 
 
+def fill_block(quads, normals, centroid, area, visibility, settings: FillSettings, start: int, stop: int, *,
+               active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, FillStats]:
+    """One block of the fill: the pairs (i, j > i) with i in rows ``start:stop``, and their mirrors.
+
+    The unit of work of :func:`assemble`, of the Dask tasks (:mod:`radiosity.cluster`) and of
+    the out-of-core writer (:mod:`radiosity.shards`): a block's result depends only on the
+    geometry, the settings and its rows, so however blocks are scheduled, F is the same bit for bit.
+
+    Returns
+    -------
+    i, j : (k,) int64
+        Receiver and source of each kept factor (below ``_tol.DROP_FACTOR`` is dropped).
+    v : (k,) float64
+        F(i -> j) with occlusion.
+    stats : FillStats
+        This block's counts and seconds (``n_rays`` included).
+    """
+    stats = FillStats()
+    rays_before = visibility.n_rays if visibility is not None else 0
+    rows = np.arange(start, stop)
+    if active is not None:
+        rows = rows[active[rows]]
+    i, j = candidate_pairs(quads, normals, centroid, rows)
+    keep = j > i
+    if active is not None:
+        keep &= active[j]
+    half = int(keep.sum())
+    i, j = np.concatenate([i[keep], j[keep]]), np.concatenate([j[keep], i[keep]])
+    if not len(i):
+        empty = np.zeros(0, np.int64)
+        return empty, empty, np.zeros(0), stats
+    t0 = time.perf_counter()
+    f = unoccluded_factors(quads, normals, centroid, area, i, j, settings)
+    t1 = time.perf_counter()
+    stats.seconds_formfactors += t1 - t0
+    if visibility is not None:
+        _apply_visibility(f, quads, centroid, i, j, visibility, settings, stats, half=half)
+        stats.seconds_visibility += time.perf_counter() - t1
+        stats.n_rays = visibility.n_rays - rays_before
+    keep = f > _tol.DROP_FACTOR
+    stats.dropped_mass += float((f[~keep] * area[i[~keep]]).sum())
+    stats.n_pairs += len(i)
+    return i[keep].astype(np.int64, copy=False), j[keep].astype(np.int64, copy=False), f[keep], stats
+
+
+def add_stats(total: FillStats, part: FillStats) -> None:
+    """Add one block's statistics to ``total`` (in place)."""
+    for name in FillStats.__dataclass_fields__:
+        setattr(total, name, getattr(total, name) + getattr(part, name))
+
+
 def assemble(quads, normals, centroid, area, visibility, settings: FillSettings, progress=None, *,
-             active: np.ndarray | None = None) -> tuple[sp.csr_matrix, FillStats]:
+             active: np.ndarray | None = None, pairs_per_block: int = FILL_PAIRS // 2
+             ) -> tuple[sp.csr_matrix, FillStats]:
     """The sparse view-factor matrix F (n, n) with occlusion, and fill statistics.
 
-    Rows are filled in blocks; a block holds the pairs (i, j > i) of its rows and their mirrors
-    (j, i), so each unordered pair is classified for occlusion once.
+    Rows are filled in blocks (:func:`fill_block`); a block holds the pairs (i, j > i) of its
+    rows and their mirrors (j, i), so each unordered pair is classified for occlusion once.
 
     ``active`` (n,) bool, default all: pairs with an inactive patch at either end (hidden or
     obstruction patches, whose rows and columns the solver zeroes) are left out of F entirely:
@@ -271,39 +323,22 @@ def assemble(quads, normals, centroid, area, visibility, settings: FillSettings,
     """
     n = len(quads)
     stats = FillStats()
-    rays_before = visibility.n_rays if visibility is not None else 0
-    parts_i, parts_j, parts_v = [], [], []
-    for start, stop in _row_blocks(n, FILL_PAIRS // 2):
-        rows = np.arange(start, stop)
-        if active is not None:
-            rows = rows[active[rows]]
-        i, j = candidate_pairs(quads, normals, centroid, rows)
-        keep = j > i
-        if active is not None:
-            keep &= active[j]
-        half = int(keep.sum())
-        i, j = np.concatenate([i[keep], j[keep]]), np.concatenate([j[keep], i[keep]])
-        if len(i):
-            t0 = time.perf_counter()
-            f = unoccluded_factors(quads, normals, centroid, area, i, j, settings)
-            t1 = time.perf_counter()
-            stats.seconds_formfactors += t1 - t0
-            if visibility is not None:
-                _apply_visibility(f, quads, centroid, i, j, visibility, settings, stats, half=half)
-                stats.seconds_visibility += time.perf_counter() - t1
-            keep = f > _tol.DROP_FACTOR
-            stats.dropped_mass += float((f[~keep] * area[i[~keep]]).sum())
-            stats.n_pairs += len(i)
-            parts_i.append(i[keep])
-            parts_j.append(j[keep])
-            parts_v.append(f[keep])
+    parts = []
+    for start, stop in _row_blocks(n, pairs_per_block):
+        i, j, v, block_stats = fill_block(quads, normals, centroid, area, visibility, settings, start, stop,
+                                          active=active)
+        add_stats(stats, block_stats)
+        parts.append((i, j, v))
         if progress is not None:
             progress(stop - start)
-    if visibility is not None:
-        stats.n_rays = visibility.n_rays - rays_before
-    if parts_i:
-        i, j, v = (np.concatenate(p) for p in (parts_i, parts_j, parts_v))
+    return coo_parts_to_csr(parts, n), stats
+
+
+def coo_parts_to_csr(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]], n: int) -> sp.csr_matrix:
+    """The (n, n) CSR matrix of blocks' (i, j, v), in block order (the same order, the same bits)."""
+    if parts:
+        i, j, v = (np.concatenate(p) for p in zip(*parts))
     else:
         i = j = np.zeros(0, np.int64)
         v = np.zeros(0)
-    return sp.csr_matrix((v, (i, j)), shape=(n, n)), stats
+    return sp.csr_matrix((v, (i, j)), shape=(n, n))

@@ -41,6 +41,11 @@ class Options:
         Relative residual at which iterative solvers stop.
     cache : bool
         Reuse form factors stored on disk for the same geometry and accuracy settings.
+    workers : int or None
+        Fill the view-factor matrix on a local Dask cluster of this many processes
+        (:mod:`radiosity.cluster`; needs ``radiosity[cluster]``). None: in this process.
+    scheduler : str or None
+        Fill it on the running Dask cluster at this address (``tcp://host:8786``) instead.
     """
 
     patch_size_rel: float = 1 / 25
@@ -56,6 +61,8 @@ class Options:
     rtol: float = 1e-10
     cache: bool = True
     progress: bool = False
+    workers: int | None = None
+    scheduler: str | None = None
 
     @classmethod
     def from_preset(cls, preset: str = "default", **overrides) -> "Options":

@@ -20,7 +20,7 @@ from .solution import Solution
 from .system import energy_balance, solve_system
 from .visibility import Visibility
 
-__all__ = ["solve", "view_factors", "compute_view_factors", "prepare"]
+__all__ = ["solve", "view_factors", "compute_view_factors", "write_view_factors", "prepare"]
 
 
 @dataclass
@@ -79,6 +79,8 @@ def prepare(scene: Scene, options: Options) -> Prepared:
             timings["visibility"] = 0.0
             timings["cache"] = time.perf_counter() - t0 - timings["patches"]
             return Prepared(cut, F, stats, timings, cache_hit=True)
+    if options.workers is not None or options.scheduler is not None:
+        return _prepare_on_cluster(cut, settings, inactive, options, cache, key, timings)
     visibility = Visibility(cut.patch_quads, cut.patch_normal, cut.patch_object, cut.scale,
                             samples=settings.visibility_samples, max_samples=settings.visibility_max_samples)
     update, close = _progress_bar(options.progress, cut.n_patches, "form factors")
@@ -92,6 +94,24 @@ def prepare(scene: Scene, options: Options) -> Prepared:
     note = visibility.union_note()
     if note is not None:
         warnings.warn(note, RadiosityWarning, stacklevel=3)
+    if cache is not None:
+        cache.store(key, settings, F, stats)
+    return Prepared(cut, F, stats, timings)
+
+
+def _prepare_on_cluster(cut, settings, inactive, options, cache, key, timings) -> Prepared:
+    """The fill of :func:`prepare` with its row blocks as Dask tasks (:mod:`radiosity.cluster`)."""
+    from .cluster import FillProblem, cluster_client, fill_matrix
+
+    problem = FillProblem.from_scene(cut, settings, ~inactive)
+    update, close = _progress_bar(options.progress, cut.n_patches, "form factors")
+    try:
+        with cluster_client(options.workers, options.scheduler) as client:
+            F, stats = fill_matrix(problem, client=client, progress=update)
+    finally:
+        close()
+    timings["form factors"] = stats.seconds_formfactors
+    timings["visibility"] = stats.seconds_visibility
     if cache is not None:
         cache.store(key, settings, F, stats)
     return Prepared(cut, F, stats, timings)
@@ -165,6 +185,62 @@ def _without(F: sp.csr_matrix, inactive: np.ndarray) -> sp.csr_matrix:
 ENFORCE = ("none", "reciprocity", "closure", "auto")
 
 
+def _view_factor_options(preset: str, overrides: dict) -> Options:
+    """The options of a view-factor fill (tighter than a solve's; no cut unless asked)."""
+    # The matrix is the product here: each factor to 1e-6 (or tighter) unless asked; partly
+    # occluded pairs then take exact shadow clipping ("auto" with visibility_rtol 1e-6).
+    tight = {"formfactor_rtol": 1e-6, "visibility_rtol": 1e-6}
+    if preset in PRESETS:
+        tight = {k: min(v, getattr(PRESETS[preset], k)) for k, v in tight.items()}
+    overrides = {**tight, **overrides}
+    options = Options.from_preset(preset, **overrides)
+    if options.max_patch_size is None:
+        options = Options.from_preset(preset, **{**overrides, "patch_size_rel": np.inf})
+    return options
+
+
+def write_view_factors(scene: Scene, path, *, preset: str = "default", pairs_per_block: int | None = None,
+                       **overrides) -> "ShardedViewFactors":
+    """The view-factor matrix written out of core, as it is filled, into the shard folder ``path``.
+
+    For matrices larger than memory: only one row block is in memory at a time (its size planned
+    from the memory budget, ``RADIOSITY_MEMORY_BUDGET``), and each is written to its shard as
+    soon as it is computed. Same options as :func:`view_factors` (``workers=`` or
+    ``scheduler=`` fill the blocks on a Dask cluster), except ``enforce``: the shards hold the
+    matrix as filled. See :mod:`radiosity.shards`.
+
+    Returns
+    -------
+    radiosity.shards.ShardedViewFactors
+        The lazy matrix, as :func:`radiosity.load_view_factors` reads it back.
+
+    Examples
+    --------
+    >>> import tempfile, numpy as np, radiosity
+    >>> scene = radiosity.load_scene(radiosity.bundled_scene("unit_cube"), max_patch_size=0.5)
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     F = radiosity.write_view_factors(scene, tmp + "/F.shards")
+    ...     F.shape, bool(np.allclose(F @ np.ones(24), 1.0, atol=1e-6))
+    ((24, 24), True)
+    """
+    from .cluster import FillProblem, cluster_client
+    from .shards import write_shards
+
+    options = _view_factor_options(preset, {**overrides, "cache": False})
+    cut = _cut(scene, options)
+    settings = _fill_settings(options)
+    problem = FillProblem.from_scene(cut, settings, ~_inactive(cut))
+    update, close = _progress_bar(options.progress, cut.n_patches, "form factors")
+    try:
+        with cluster_client(options.workers, options.scheduler) as client:
+            F, _ = write_shards(problem, cut, path, client=client, pairs_per_block=pairs_per_block, progress=update,
+                                settings={"preset": preset, "formfactor_rtol": options.formfactor_rtol,
+                                          "visibility_rtol": options.visibility_rtol})
+    finally:
+        close()
+    return F
+
+
 def compute_view_factors(scene: Scene, *, preset: str = "default", enforce: str = "none", force: bool = False,
                          **overrides) -> "ViewFactors":
     """The view-factor matrix together with the patches it belongs to.
@@ -192,15 +268,7 @@ def compute_view_factors(scene: Scene, *, preset: str = "default", enforce: str 
         raise TypeError(f"unknown enforce {enforce!r}; valid: {', '.join(ENFORCE)}")
     if enforce == "auto":  # what the model file asks for (View3D encl=1), else nothing
         enforce = "closure" if getattr(scene, "enclosure", False) else "none"
-    # The matrix is the product here: each factor to 1e-6 (or tighter) unless asked; partly
-    # occluded pairs then take exact shadow clipping ("auto" with visibility_rtol 1e-6).
-    tight = {"formfactor_rtol": 1e-6, "visibility_rtol": 1e-6}
-    if preset in PRESETS:
-        tight = {k: min(v, getattr(PRESETS[preset], k)) for k, v in tight.items()}
-    overrides = {**tight, **overrides}
-    options = Options.from_preset(preset, **overrides)
-    if options.max_patch_size is None:
-        options = Options.from_preset(preset, **{**overrides, "patch_size_rel": np.inf})
+    options = _view_factor_options(preset, overrides)
     prepared = prepare(scene, options)
     cut = prepared.scene
     active = ~_inactive(cut)

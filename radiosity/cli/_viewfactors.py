@@ -43,11 +43,43 @@ def add_args(parser) -> None:
     parser.add_argument("--vf-binary", action="store_true", help="write the --vf file in View3D's binary format")
     parser.add_argument("--vs3", type=Path, default=None, metavar="MODEL.vs3",
                         help="also write the patches as a View3D model")
+    add_cluster_args(parser)
+    parser.add_argument("--out-of-core", action="store_true",
+                        help="write F as it is filled into the folder -o names (row-block shards and an "
+                             "index.json, for matrices larger than memory; read with "
+                             "radiosity.load_view_factors); blocks sized from RADIOSITY_MEMORY_BUDGET")
+
+
+def _positive_int(text: str) -> int:
+    import argparse
+
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive whole number of processes, got {text!r}")
+    return value
+
+
+def add_cluster_args(parser) -> None:
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=_positive_int, default=None, metavar="N",
+                       help="fill the matrix on a local Dask cluster of N processes (needs radiosity[cluster])")
+    where.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="fill the matrix on the running Dask cluster at ADDRESS (tcp://HOST:PORT)")
+
+
+def cluster_overrides(args) -> dict:
+    return {k: v for k, v in (("workers", args.workers), ("scheduler", args.scheduler)) if v is not None}
 
 
 def run(args) -> int:
     scene = load(args)
-    vf = compute_view_factors(scene, preset=args.preset, enforce=args.enforce, force=args.force, **overrides(args))
+    if args.out_of_core:
+        return _run_out_of_core(scene, args)
+    vf = compute_view_factors(scene, preset=args.preset, enforce=args.enforce, force=args.force,
+                              **overrides(args), **cluster_overrides(args))
     cut = vf.scene
     grouped = vf.grouped(args.group_by) if args.group_by else None
     arrays = view_factor_arrays(vf, grouped=grouped)
@@ -86,3 +118,17 @@ def _print_summary(vf, d, grouped, asked: str) -> None:
         print(f"{'surface':<24} {'area m2':>10} {'row sum':>11} {'sky factor':>11}")
         for name, area, row, escape in zip(grouped.names, grouped.area, grouped.row_sums, grouped.sky_factor):
             print(f"{name[:24]:<24} {area:>10.4g} {row:>11.8f} {escape:>11.3g}")
+
+
+def _run_out_of_core(scene, args) -> int:
+    """``--out-of-core``: the shards and their index, nothing held in memory but one block."""
+    from ..solve import write_view_factors
+
+    extra = [name for name, given in (("--vf", args.vf), ("--vs3", args.vs3), ("--sum", args.group_by),
+                                      ("--enforce", args.enforce not in ("auto", "none"))) if given]
+    if extra:
+        raise ValueError(f"{', '.join(extra)} cannot be combined with --out-of-core (the shards hold F as filled)")
+    F = write_view_factors(scene, args.output, preset=args.preset, **overrides(args), **cluster_overrides(args))
+    print(f"{F.shape[0]} patches, {F.nnz:,} non-zero view factors in {F.n_blocks} shards")
+    print(f"wrote {args.output}")
+    return 0
