@@ -627,4 +627,6 @@ def classify(mutant: Mutant, run: Run, base: Run | None = None) -> tuple[str, st
         return TOO_LONG, f"{len(lines)} stderr lines: {(lines[:1] or [''])[0][:200]}"
     if len(lines[0]) > MAX_MESSAGE:
         return TOO_LONG, f"{len(lines[0])} characters: {lines[0][:200]}"
+    if not any(name in lines[0] for name in mutant.files):
+        return TOO_LONG, f"names no input file: {lines[0][:200]}"  # every reader error names its file
     return CLEAN, lines[0][:200]

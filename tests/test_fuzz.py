@@ -57,6 +57,7 @@ def test_the_classifier_flags_what_is_not_clean():
     assert fuzzing.classify(bad, ok_run)[0] == fuzzing.CLEAN
     assert fuzzing.classify(bad, fuzzing.Run(2, "radiosity: error: " + "x" * 400 + "\n", ""))[0] == fuzzing.TOO_LONG
     assert fuzzing.classify(bad, fuzzing.Run(2, "noise\nradiosity: error: x\n", ""))[0] == fuzzing.TOO_LONG
+    assert fuzzing.classify(bad, fuzzing.Run(2, "radiosity: error: something is wrong\n", ""))[0] == fuzzing.TOO_LONG
     assert fuzzing.classify(bad, fuzzing.Run(1, "Traceback (most recent call last):\n", ""))[0] == fuzzing.TRACEBACK
     assert fuzzing.classify(bad, fuzzing.Run(0, "", "", results={}))[0] == fuzzing.ACCEPTED_INVALID
     assert fuzzing.classify(mutant, fuzzing.Run(0, "", "", nonfinite="F.npz[data]"))[0] == fuzzing.NAN_EXIT0
@@ -125,8 +126,10 @@ def test_a_tiny_base_with_subsurfaces_is_refused_or_cut(tmp_path, factor):
     import radiosity
     from test_view3d_semantics import ROOM
 
-    scaled = re.sub(r"^(V \d+) (\S+) (\S+) (\S+)", lambda m: m[1] + "".join(f" {float(x) * factor!r}" for x in m.groups()[1:]),
-                    ROOM, flags=re.M)
+    def scale(match):
+        return match[1] + "".join(f" {float(x) * factor!r}" for x in match.groups()[1:])
+
+    scaled = re.sub(r"^(V \d+) (\S+) (\S+) (\S+)", scale, ROOM, flags=re.M)
     path = tmp_path / "tiny.vs3"
     path.write_text(scaled)
     try:

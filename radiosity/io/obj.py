@@ -171,7 +171,8 @@ def read_mtl(path: Path, referenced_from: str = "", notes: list[str] | None = No
             if tokens and tokens[0] in ("spectral", "xyz"):
                 raise SceneError(f"{where}: {keyword} {excerpt(tokens[0])} is not supported; give RGB values")
             if len(tokens) == 2:
-                raise SceneError(f"{where}: {keyword} needs 1 number (grey) or 3 (RGB), got 2: {excerpt(' '.join(tokens))!r}")
+                raise SceneError(f"{where}: {keyword} needs 1 number (grey) or 3 (RGB), got 2: "
+                                 f"{excerpt(' '.join(tokens))!r}")
             values = _floats(tokens, 3 if len(tokens) >= 3 else 1, where, keyword)
             if len(values) == 1:
                 values = values * 3
@@ -387,7 +388,8 @@ def read_obj(path) -> ObjData:
         name = material_names[m]
         if name not in library:
             known = ", ".join(sorted(library)) or "none (no mtllib in the file)"
-            raise SceneError(f"{material_first_use[name]}: unknown material {excerpt(name)!r}; defined: {excerpt(known)}")
+            raise SceneError(f"{material_first_use[name]}: unknown material {excerpt(name)!r}; "
+                             f"defined: {excerpt(known)}")
     material_remap = {old: new for new, old in enumerate(used_materials)}
     material_remap[-1] = -1
 

@@ -179,7 +179,8 @@ def read_vs3(path) -> View3DModel:
         elif key == "F":
             geometry = words[1].lower() if len(words) > 1 else "3"
             if geometry not in ("3", "3a"):
-                raise SceneError(f"{where}: only 3-D View3D models (F 3 or F 3a) are supported, got F {excerpt(words[1])}")
+                raise SceneError(f"{where}: only 3-D View3D models (F 3 or F 3a) are supported, "
+                                 f"got F {excerpt(words[1])}")
         elif key == "V":
             if len(words) < 5:
                 raise SceneError(f"{where}: a vertex line needs 'V n x y z', got {excerpt(raw)!r}")
