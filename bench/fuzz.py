@@ -1,6 +1,6 @@
 """A seeded fuzz campaign over OBJ/MTL, ``.vs3`` and points inputs, counted by outcome (issue 19).
 
-    python bench/fuzz.py [--quick] [--obj 500 --vs3 300 --points 100 --seed 0]
+    python bench/fuzz.py [--quick] [--obj 300 --vs3 200 --points 100 --seed 0]
 
 Each mutant of the bundled scenes, the test suite's View3D models and a points file (see
 ``tests/fuzzing.py`` for the edits and what each one expects) runs through ``radiosity.cli.main``
@@ -32,8 +32,8 @@ HEADERS = {"obj": "OBJ/MTL", "vs3": ".vs3", "points": "points"}
 
 
 def _extra(parser) -> None:
-    parser.add_argument("--obj", type=int, default=500)
-    parser.add_argument("--vs3", type=int, default=300)
+    parser.add_argument("--obj", type=int, default=300)
+    parser.add_argument("--vs3", type=int, default=200)
     parser.add_argument("--points", type=int, default=100)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--timeout", type=float, default=120.0, help="seconds per run")

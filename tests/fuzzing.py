@@ -119,7 +119,8 @@ def _vs3_fields(lines: list[str]) -> list[tuple[int, int, str]]:
             out += [(i, k, "vref") for k in range(2, 6) if words[0] == "O" and len(words) > 5]
         elif _NUMBER.fullmatch(words[0]):  # F 3a geometry lines
             out += [(i, k, "shape") for k in range(len(words))]
-    return [(i, k, kind) for i, k, kind in out if k < len(lines[i].split("!", 1)[0].split())]
+    count = {i: len(lines[i].split("!", 1)[0].split()) for i in {i for i, _, _ in out}}  # once per line
+    return [(i, k, kind) for i, k, kind in out if k < count[i]]
 
 
 def _points_fields(lines: list[str]) -> list[tuple[int, int, str]]:
