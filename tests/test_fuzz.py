@@ -138,3 +138,14 @@ def test_a_tiny_base_with_subsurfaces_is_refused_or_cut(tmp_path, factor):
         assert re.search(r"tiny\.vs3:\d+: surface \d+ \(\w+\) has zero area", str(exc))
     else:
         assert np.isfinite(scene.patch_area).all() and (scene.patch_area > 0).all()
+
+
+@pytest.mark.parametrize("geometry", ["1 1 0   0 0   1e200 1", "1e300 1 0   0 0   1 1", "1 1 0   0 0   1e9 2e9"])
+def test_3a_shapes_are_bounded_like_vertices(tmp_path, geometry):
+    """An F 3a rectangle 1e200 wide overflowed to an OverflowError (internal error) when cut."""
+    import radiosity
+
+    path = tmp_path / "wide.vs3"
+    path.write_text(f"T wide\nF 3a\nS 1 R 0 0 0.5 floor\n  {geometry}\nE\n")
+    with pytest.raises(radiosity.SceneError, match=r"wide\.vs3:3: surface 1 has a corner beyond 1e\+09"):
+        radiosity.load_scene(path)

@@ -283,7 +283,13 @@ def _shape_surface(words, where, key, model, tokens: _Tokens) -> np.ndarray:
     # The plane's axes (View3D manual, F = 3a): u horizontal, v up the slope at the tilt.
     u_axis = np.array([-math.cos(azimuth), math.sin(azimuth), 0.0])
     v_axis = np.array([-math.cos(tilt) * math.sin(azimuth), -math.cos(tilt) * math.cos(azimuth), math.sin(tilt)])
-    return origin + uv[:, :1] * u_axis + uv[:, 1:] * v_axis
+    with np.errstate(over="ignore", invalid="ignore"):
+        corners = origin + uv[:, :1] * u_axis + uv[:, 1:] * v_axis
+    # The shape's numbers are bounded like V lines' coordinates: beyond, areas overflow later.
+    if not (np.isfinite(corners).all() and np.abs(corners).max() <= MAX_COORDINATE):
+        raise SceneError(f"{where}: surface {n} has a corner beyond {MAX_COORDINATE:g} (its origin, size or "
+                         "outline is too large)")
+    return corners
 
 
 def _check_references(model: View3DModel) -> None:
