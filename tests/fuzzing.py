@@ -290,7 +290,7 @@ def edit_long_line(rng, text, kind):
 
 
 def edit_flip_byte(rng, text, kind):
-    data = bytearray(text.encode())
+    data = bytearray(text.encode("utf-8", errors="surrogateescape"))
     if not data:
         return None
     at = rng.randrange(len(data))
@@ -406,8 +406,10 @@ def _mutate_text(rng, text: str, kind: str) -> tuple[str, str, list[str]]:
             if picked:
                 edits.append(picked[0])
                 text = picked[1][0]
-    for _ in range(rng.randint(1 if plan == "same" else 0, 2)):
-        picked = _apply(rng, text, kind, SAME_EDITS, want="same")
+    # Line ends change last: the token edits split lines on "\n" and join words with spaces.
+    names = [rng.choice(SAME_EDITS) for _ in range(rng.randint(1 if plan == "same" else 0, 2))]
+    for name in sorted(names, key=lambda n: n == "line_ends"):
+        picked = _apply(rng, text, kind, (name,), want="same")
         if picked:
             edits.append(picked[0])
             text = picked[1][0]
@@ -628,6 +630,7 @@ def classify(mutant: Mutant, run: Run, base: Run | None = None) -> tuple[str, st
         return TOO_LONG, f"{len(lines)} stderr lines: {(lines[:1] or [''])[0][:200]}"
     if len(lines[0]) > MAX_MESSAGE:
         return TOO_LONG, f"{len(lines[0])} characters: {lines[0][:200]}"
-    if not any(name in lines[0] for name in mutant.files):
-        return TOO_LONG, f"names no input file: {lines[0][:200]}"  # every reader error names its file
+    # Every reader error names its file; a memory refusal is about the request (scene size, patch size).
+    if not any(name in lines[0] for name in mutant.files) and " of memory, more than " not in lines[0]:
+        return TOO_LONG, f"names no input file: {lines[0][:200]}"
     return CLEAN, lines[0][:200]

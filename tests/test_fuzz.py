@@ -149,3 +149,15 @@ def test_3a_shapes_are_bounded_like_vertices(tmp_path, geometry):
     path.write_text(f"T wide\nF 3a\nS 1 R 0 0 0.5 floor\n  {geometry}\nE\n")
     with pytest.raises(radiosity.SceneError, match=r"wide\.vs3:3: surface 1 has a corner beyond 1e\+09"):
         radiosity.load_scene(path)
+
+
+def test_a_self_crossing_subsurface_is_refused_by_name(tmp_path):
+    """A door corner moved to x = 5e-324 made the door's outline cross itself; GEOS's
+    TopologyException came out as an internal error."""
+    import radiosity
+    from test_view3d_semantics import ROOM
+
+    path = tmp_path / "crossed.vs3"
+    path.write_text(ROOM.replace("V 11 1.4 0 2", "V 11 5e-324 0 2"))
+    with pytest.raises(radiosity.SceneError, match=r"crossed\.vs3:\d+: (sub)?surface \d+ \(\w+\).*simple polygon"):
+        radiosity.load_scene(path)

@@ -397,6 +397,17 @@ def _newell(polygon: np.ndarray) -> np.ndarray:
 
 def _cut_out(model: View3DModel, k: int, subs: list[int]) -> tuple[list[np.ndarray], float]:
     """Convex pieces (3-D corners) of surface k outside its subsurfaces, and their total area."""
+    from shapely.errors import GEOSException
+
+    try:
+        return _cut_out_pieces(model, k, subs)
+    except GEOSException as exc:  # a self-crossing base or subsurface the checks did not catch
+        raise SceneError(f"{model.path}:{model.line[k]}: surface {k + 1} ({model.names[k]}): its subsurfaces "
+                         f"cannot be cut out of it; check that it and they are simple polygons "
+                         f"(GEOS: {excerpt(str(exc), 60)})") from None
+
+
+def _cut_out_pieces(model: View3DModel, k: int, subs: list[int]) -> tuple[list[np.ndarray], float]:
     import shapely
     from shapely.geometry import Polygon
 
@@ -436,6 +447,9 @@ def _cut_out(model: View3DModel, k: int, subs: list[int]) -> tuple[list[np.ndarr
             raise SceneError(f"{where}: subsurface {s + 1} ({model.names[s]}) must face the same way as its base "
                              f"{k + 1} ({model.names[k]}); list its vertices the other way round")
         hole = flat(corners)
+        if not hole.is_valid:  # GEOS cannot subtract a polygon whose edges cross
+            raise SceneError(f"{where}: subsurface {s + 1} ({model.names[s]}) is not a simple polygon (its edges "
+                             "cross or its corners coincide); its base cannot be cut along it")
         if not region.buffer(10 * grid).covers(hole):
             raise SceneError(f"{where}: subsurface {s + 1} ({model.names[s]}) is not entirely within its base "
                              f"{k + 1} ({model.names[k]})")
