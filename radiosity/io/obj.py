@@ -20,6 +20,7 @@ What the reader accepts (see ``docs/errors.md`` for every message):
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -40,6 +41,8 @@ MAX_EMISSION = 1e30
 # A file whose first bytes hold this fraction of control characters (or any NUL) is binary.
 _BINARY_FRACTION = 0.1
 _SNIFF_BYTES = 8192
+
+_INTEGER = re.compile(r"[+-]?[0-9]+", re.ASCII)
 
 # Statements that carry geometry we cannot use; they are counted and reported, not read.
 _IGNORED_ELEMENTS = {"l": "line", "p": "point", "curv": "curve", "curv2": "curve", "surf": "surface"}
@@ -107,13 +110,13 @@ def _read_lines(path: Path, what: str, referenced_from: str = "", notes: list[st
     try:
         data = read_input(path, what)
     except FileNotFoundError:
-        raise SceneError(f"{origin}{what} file '{path}' does not exist") from None
+        raise SceneError(f"{origin}{what} file '{excerpt(str(path))}' does not exist") from None
     except IsADirectoryError:
-        raise SceneError(f"{origin}{what} file '{path}' is a folder, not a file") from None
+        raise SceneError(f"{origin}{what} file '{excerpt(str(path))}' is a folder, not a file") from None
     except OSError as exc:
-        raise SceneError(f"{origin}cannot read {what} file '{path}': {exc.strerror or exc}") from None
+        raise SceneError(f"{origin}cannot read {what} file '{excerpt(str(path))}': {exc.strerror or exc}") from None
     except ValueError as exc:  # e.g. a NUL byte in a file name taken from an OBJ
-        raise SceneError(f"{origin}cannot read {what} file {str(path)!r}: {exc}") from None
+        raise SceneError(f"{origin}cannot read {what} file {excerpt(str(path))!r}: {exc}") from None
     if _is_binary(data):
         raise SceneError(f"{path}: is not a text {what} file (binary data)")
     try:
@@ -166,9 +169,10 @@ def read_mtl(path: Path, referenced_from: str = "", notes: list[str] | None = No
             if current is None:
                 raise SceneError(f"{where}: {keyword} appears before any newmtl")
             if tokens and tokens[0] in ("spectral", "xyz"):
-                raise SceneError(f"{where}: {keyword} {tokens[0]} is not supported; give RGB values")
+                raise SceneError(f"{where}: {keyword} {excerpt(tokens[0])} is not supported; give RGB values")
             if len(tokens) == 2:
-                raise SceneError(f"{where}: {keyword} needs 1 number (grey) or 3 (RGB), got 2: {' '.join(tokens)!r}")
+                raise SceneError(f"{where}: {keyword} needs 1 number (grey) or 3 (RGB), got 2: "
+                                 f"{excerpt(' '.join(tokens))!r}")
             values = _floats(tokens, 3 if len(tokens) >= 3 else 1, where, keyword)
             if len(values) == 1:
                 values = values * 3
@@ -185,9 +189,11 @@ def read_mtl(path: Path, referenced_from: str = "", notes: list[str] | None = No
 def _face_index(token: str, n_vertices: int, where: str, face_number: int) -> int:
     head = token.split("/", 1)[0]
     try:
+        if not _INTEGER.fullmatch(head):  # int() also takes '1_0' and non-ASCII digits
+            raise ValueError(head)
         index = int(head)
     except ValueError:
-        raise SceneError(f"{where}: face {face_number} has a bad vertex reference {token!r}") from None
+        raise SceneError(f"{where}: face {face_number} has a bad vertex reference {excerpt(token)!r}") from None
     if index == 0:
         raise SceneError(f"{where}: face {face_number} uses vertex 0, but OBJ vertex numbers start at 1")
     resolved = index - 1 if index > 0 else n_vertices + index
@@ -326,7 +332,7 @@ def read_obj(path) -> ObjData:
             xyz = _floats(tokens, 3, where, f"vertex {len(vertices) + 1}")
             if max(abs(c) for c in xyz) > MAX_COORDINATE:
                 raise SceneError(f"{where}: vertex {len(vertices) + 1} has a coordinate beyond "
-                                 f"{MAX_COORDINATE:g}: {' '.join(tokens[:3])!r}")
+                                 f"{MAX_COORDINATE:g}: {excerpt(' '.join(tokens[:3]))!r}")
             vertices.append(xyz)
         elif keyword == "f":
             face_number = len(faces) + 1
@@ -382,7 +388,8 @@ def read_obj(path) -> ObjData:
         name = material_names[m]
         if name not in library:
             known = ", ".join(sorted(library)) or "none (no mtllib in the file)"
-            raise SceneError(f"{material_first_use[name]}: unknown material {name!r}; defined: {known}")
+            raise SceneError(f"{material_first_use[name]}: unknown material {excerpt(name)!r}; "
+                             f"defined: {excerpt(known)}")
     material_remap = {old: new for new, old in enumerate(used_materials)}
     material_remap[-1] = -1
 

@@ -107,7 +107,7 @@ def _number(token: str, where: str, what: str, kind=float):
     except ValueError:
         raise SceneError(f"{where}: {what} must be a number, got {excerpt(token)!r}") from None
     if kind is float and not np.isfinite(value):
-        raise SceneError(f"{where}: {what} is not finite: {token!r}")
+        raise SceneError(f"{where}: {what} is not finite: {excerpt(token)!r}")
     return value
 
 
@@ -135,7 +135,7 @@ class _Tokens:
             self.index += 1
             self.where = f"{self.path}:{self.index}"
             if text and text[0][0].isalpha():
-                raise SceneError(f"{self.where}: expected {what}, got the record {text[0]!r}")
+                raise SceneError(f"{self.where}: expected {what}, got the record {excerpt(text[0])!r}")
             self.pending = text
         return _number(self.pending.pop(0), self.where, what)
 
@@ -179,10 +179,11 @@ def read_vs3(path) -> View3DModel:
         elif key == "F":
             geometry = words[1].lower() if len(words) > 1 else "3"
             if geometry not in ("3", "3a"):
-                raise SceneError(f"{where}: only 3-D View3D models (F 3 or F 3a) are supported, got F {words[1]}")
+                raise SceneError(f"{where}: only 3-D View3D models (F 3 or F 3a) are supported, "
+                                 f"got F {excerpt(words[1])}")
         elif key == "V":
             if len(words) < 5:
-                raise SceneError(f"{where}: a vertex line needs 'V n x y z', got {raw.strip()!r}")
+                raise SceneError(f"{where}: a vertex line needs 'V n x y z', got {excerpt(raw)!r}")
             n = _number(words[1], where, "vertex number", int)
             if n != len(vertices) + 1:
                 raise SceneError(f"{where}: vertex {n} out of sequence (expected {len(vertices) + 1})")
@@ -202,7 +203,7 @@ def read_vs3(path) -> View3DModel:
         elif key in "MN":
             raise SceneError(f"{where}: View3D mask/null surfaces ({key}) are not supported")
         else:
-            raise SceneError(f"{where}: unknown View3D identifier {words[0]!r}")
+            raise SceneError(f"{where}: unknown View3D identifier {excerpt(words[0])!r}")
     if not model.surfaces:
         raise SceneError(f"{path}: the model has no surfaces")
     model.vertices = np.asarray(vertices, float).reshape(-1, 3)
@@ -248,7 +249,7 @@ def _surface_data(words: list[str], where: str, key: str, n: int, model: View3DM
 
 def _vertex_surface(words, where, key, model, n_vertices) -> list[int]:
     if len(words) < 6:
-        raise SceneError(f"{where}: a surface line needs '{key} n v1 v2 v3 v4 ...', got {' '.join(words)!r}")
+        raise SceneError(f"{where}: a surface line needs '{key} n v1 v2 v3 v4 ...', got {excerpt(' '.join(words))!r}")
     n = _surface_number(words, where, model)
     refs = [_number(t, where, "a vertex reference", int) for t in words[2:6]]
     if refs[3] == 0:
@@ -263,11 +264,11 @@ def _vertex_surface(words, where, key, model, n_vertices) -> list[int]:
 def _shape_surface(words, where, key, model, tokens: _Tokens) -> np.ndarray:
     """Corners (k, 3) of an ``F 3a`` surface: shape letter, data, then plane and outline."""
     if len(words) < 3:
-        raise SceneError(f"{where}: a 3a surface needs '{key} n R|Q|T ...', got {' '.join(words)!r}")
+        raise SceneError(f"{where}: a 3a surface needs '{key} n R|Q|T ...', got {excerpt(' '.join(words))!r}")
     n = _surface_number(words, where, model)
     shape = words[2].upper()
     if shape not in ("R", "Q", "T"):
-        raise SceneError(f"{where}: surface {n} has shape {words[2]!r}; F 3a shapes are R, Q and T")
+        raise SceneError(f"{where}: surface {n} has shape {excerpt(words[2])!r}; F 3a shapes are R, Q and T")
     _surface_data(words[3:], where, key, n, model)
     tokens.where = where
     origin = np.array([tokens.take(f"the origin of surface {n}") for _ in range(3)])
@@ -282,7 +283,13 @@ def _shape_surface(words, where, key, model, tokens: _Tokens) -> np.ndarray:
     # The plane's axes (View3D manual, F = 3a): u horizontal, v up the slope at the tilt.
     u_axis = np.array([-math.cos(azimuth), math.sin(azimuth), 0.0])
     v_axis = np.array([-math.cos(tilt) * math.sin(azimuth), -math.cos(tilt) * math.cos(azimuth), math.sin(tilt)])
-    return origin + uv[:, :1] * u_axis + uv[:, 1:] * v_axis
+    with np.errstate(over="ignore", invalid="ignore"):
+        corners = origin + uv[:, :1] * u_axis + uv[:, 1:] * v_axis
+    # The shape's numbers are bounded like V lines' coordinates: beyond, areas overflow later.
+    if not (np.isfinite(corners).all() and np.abs(corners).max() <= MAX_COORDINATE):
+        raise SceneError(f"{where}: surface {n} has a corner beyond {MAX_COORDINATE:g} (its origin, size or "
+                         "outline is too large)")
+    return corners
 
 
 def _check_references(model: View3DModel) -> None:
@@ -390,6 +397,17 @@ def _newell(polygon: np.ndarray) -> np.ndarray:
 
 def _cut_out(model: View3DModel, k: int, subs: list[int]) -> tuple[list[np.ndarray], float]:
     """Convex pieces (3-D corners) of surface k outside its subsurfaces, and their total area."""
+    from shapely.errors import GEOSException
+
+    try:
+        return _cut_out_pieces(model, k, subs)
+    except GEOSException as exc:  # a self-crossing base or subsurface the checks did not catch
+        raise SceneError(f"{model.path}:{model.line[k]}: surface {k + 1} ({model.names[k]}): its subsurfaces "
+                         f"cannot be cut out of it; check that it and they are simple polygons "
+                         f"(GEOS: {excerpt(str(exc), 60)})") from None
+
+
+def _cut_out_pieces(model: View3DModel, k: int, subs: list[int]) -> tuple[list[np.ndarray], float]:
     import shapely
     from shapely.geometry import Polygon
 
@@ -397,7 +415,11 @@ def _cut_out(model: View3DModel, k: int, subs: list[int]) -> tuple[list[np.ndarr
 
     base = model.vertices[model.surfaces[k]]
     normal = _newell(base)
-    normal = normal / np.linalg.norm(normal)
+    length = float(np.linalg.norm(normal))
+    if not (math.isfinite(length) and length > 0):  # e.g. corners 1e-160 apart: the area underflows
+        raise SceneError(f"{model.path}:{model.line[k]}: surface {k + 1} ({excerpt(model.names[k])}) has zero area "
+                         "(or one too small for float64); its subsurfaces cannot be cut out of it")
+    normal = normal / length
     origin = base[0]
     u = base[1] - base[0]
     u = u - (u @ normal) * normal
@@ -425,6 +447,9 @@ def _cut_out(model: View3DModel, k: int, subs: list[int]) -> tuple[list[np.ndarr
             raise SceneError(f"{where}: subsurface {s + 1} ({model.names[s]}) must face the same way as its base "
                              f"{k + 1} ({model.names[k]}); list its vertices the other way round")
         hole = flat(corners)
+        if not hole.is_valid:  # GEOS cannot subtract a polygon whose edges cross
+            raise SceneError(f"{where}: subsurface {s + 1} ({model.names[s]}) is not a simple polygon (its edges "
+                             "cross or its corners coincide); its base cannot be cut along it")
         if not region.buffer(10 * grid).covers(hole):
             raise SceneError(f"{where}: subsurface {s + 1} ({model.names[s]}) is not entirely within its base "
                              f"{k + 1} ({model.names[k]})")
