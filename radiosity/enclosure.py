@@ -159,8 +159,7 @@ def check_closed(F: sp.spmatrix, active: np.ndarray, rtol: float, *, names=None,
         what += f" (object {names[patch_object[worst]]!r})"
     kind = "deficit" if off[worst] > 0 else "surplus"
     short, over = int((off > tolerance).sum()), int((off < -tolerance).sum())
-    msg = (f"closure refused: rows miss 1 by more than the fill's error ({tolerance:.1g}): {what} sums to "
-           f"{rows[worst]:.6g} (worst row {kind} {abs(off[worst]):.3g}); {short} row(s) fall short, {over} exceed 1, "
-           "so this is not a closed enclosure (or the fill lost light there); "
-           "force=True (--force) scales the rows anyway")
+    msg = (f"closure refused: {what} sums to {rows[worst]:.6g} (worst row {kind} {abs(off[worst]):.3g}, "
+           f"allowed {tolerance:.1g}); {short} row(s) short, {over} over 1: not a closed enclosure, or the "
+           "fill lost light; --force (force=True) scales anyway")
     raise NotClosedError(msg)
