@@ -127,6 +127,8 @@ def main(argv: list[str] | None = None) -> int:
             raise
         return _error(_one_line(exc))
     except Exception as exc:  # noqa: BLE001 - not bad input: a bug, reported as one
+        if _is_interrupt(exc):  # e.g. VTK's loader turns a Ctrl-C inside its import into ImportError
+            return _interrupted(exc)
         if args.debug:
             raise
         return _internal_error(exc)

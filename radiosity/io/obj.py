@@ -37,6 +37,9 @@ MAX_COORDINATE = 1e9
 # Emitted radiance above this would overflow float32 outputs (PLY) once divided by 1 - rho and
 # multiplied by areas; the brightest real sources are some 1e9 W/(m^2 sr).
 MAX_EMISSION = 1e30
+# File names are quoted whole in messages up to this length (a path names the file); past it,
+# only the start of the file's own name is (an absurd name, such as a 5,000-character mtllib).
+PATH_CHARS = 240
 
 # A file whose first bytes hold this fraction of control characters (or any NUL) is binary.
 _BINARY_FRACTION = 0.1
@@ -103,6 +106,11 @@ def _is_binary(data: bytes) -> bool:
     return bool(head) and control > _BINARY_FRACTION * len(head)
 
 
+def _quoted(path: Path) -> str:
+    text = str(path)
+    return text if len(text) <= PATH_CHARS else excerpt(Path(text).name, 60)
+
+
 def _read_lines(path: Path, what: str, referenced_from: str = "", notes: list[str] | None = None
                 ) -> list[tuple[int, str]]:
     """(line number, text without comment) of each logical line; continuations joined."""
@@ -110,13 +118,13 @@ def _read_lines(path: Path, what: str, referenced_from: str = "", notes: list[st
     try:
         data = read_input(path, what)
     except FileNotFoundError:
-        raise SceneError(f"{origin}{what} file '{excerpt(str(path))}' does not exist") from None
+        raise SceneError(f"{origin}{what} file '{_quoted(path)}' does not exist") from None
     except IsADirectoryError:
-        raise SceneError(f"{origin}{what} file '{excerpt(str(path))}' is a folder, not a file") from None
+        raise SceneError(f"{origin}{what} file '{_quoted(path)}' is a folder, not a file") from None
     except OSError as exc:
-        raise SceneError(f"{origin}cannot read {what} file '{excerpt(str(path))}': {exc.strerror or exc}") from None
+        raise SceneError(f"{origin}cannot read {what} file '{_quoted(path)}': {exc.strerror or exc}") from None
     except ValueError as exc:  # e.g. a NUL byte in a file name taken from an OBJ
-        raise SceneError(f"{origin}cannot read {what} file {excerpt(str(path))!r}: {exc}") from None
+        raise SceneError(f"{origin}cannot read {what} file {_quoted(path)!r}: {exc}") from None
     if _is_binary(data):
         raise SceneError(f"{path}: is not a text {what} file (binary data)")
     try:
