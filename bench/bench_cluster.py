@@ -61,14 +61,14 @@ def child(case: str, size: float, preset: str) -> dict:
         out.update(fill_s=time.perf_counter() - t0, nnz=F.nnz, digest=_digest(F),
                    estimate_mb=_memory.fill_bytes(scene.n_patches) / 2**20)
     elif case.startswith("workers="):
-        from radiosity.cluster import FillProblem, cluster_client, fill_matrix
+        from radiosity.methods.uniform.cluster import FillProblem, cluster_client, fill_matrix
         from radiosity.solve import _fill_settings, _inactive, _view_factor_options
 
         options = _view_factor_options(preset, {"cache": False})
         problem = FillProblem.from_scene(scene, _fill_settings(options), ~_inactive(scene))
         t0 = time.perf_counter()
         with cluster_client(workers=int(case.split("=")[1])) as client:
-            client.run(lambda: __import__("radiosity.assembly"))  # imports (numba cache) in the start-up
+            client.run(lambda: __import__("radiosity.methods.uniform.assembly"))  # imports (numba cache) in the start-up
             t1 = time.perf_counter()
             F, _ = fill_matrix(problem, client=client)
             t2 = time.perf_counter()

@@ -61,7 +61,7 @@ def minimal_matrix_kernel():
     (it errs where the product's does not); a ceiling to read the product's figure against."""
     import numba
 
-    from radiosity._lambert import _atan2p
+    from radiosity.formfactors._lambert import _atan2p
 
     @numba.njit(parallel=True, fastmath={"contract"}, error_model="numpy", cache=False)
     def kernel(P, N, tris, out):
@@ -105,8 +105,9 @@ def main(argv=None):
     import numba
 
     from radiosity import point_to_polygons, polygon_to_polygon
-    from radiosity.formfactors import _lambert_numpy, lambert_pairs
-    from radiosity.quadrature import centroids_and_areas, pair_factors
+    from radiosity.formfactors import lambert_pairs
+    from radiosity.formfactors._closed_form import _lambert_numpy
+    from radiosity.formfactors._quadrature import centroids_and_areas, pair_factors
 
     rng = np.random.default_rng(0)
     m = 200_000 if args.quick else 2_000_000

@@ -23,7 +23,7 @@ from _common import best_time, parse_args, print_table, write_json  # noqa: E402
 
 import mpmath  # noqa: E402
 
-from radiosity import _stark, hemicube  # noqa: E402
+from radiosity.alternatives import _stark, hemicube  # noqa: E402
 from radiosity.formfactors import lambert_pairs, point_to_polygon  # noqa: E402
 
 CLIP_RADIUS = 1e4  # image-plane clip radius used in the table (Lemma 1 bound 1e-8)

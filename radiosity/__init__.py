@@ -31,7 +31,7 @@ with guard_imports():  # Ctrl-C during these seconds of imports: one line and ex
     from .options import PRESETS, Options
     from .scene import Scene, bundled_scene, load_scene
     from .solution import Solution
-    from .shards import load_view_factors
+    from .methods.uniform.shards import load_view_factors
     from .solve import compute_view_factors, solve, view_factors, write_view_factors
 
 try:

@@ -20,9 +20,9 @@ __all__ = ["kernels_on_disk", "compile_timer", "warm_up"]
 # Kernels every solve runs (form factors, near-pair flags, rays and exact shadows). If their
 # disk cache holds a fresh entry, the rest were compiled by the same run too.
 CORE_KERNELS = (
-    ("radiosity.quadrature", "_pair_setup_loop"),
-    ("radiosity.quadrature", "_near_flags_loop"),
-    ("radiosity._lambert", "_quadrature_source_kernel"),
+    ("radiosity.formfactors._quadrature", "_pair_setup_loop"),
+    ("radiosity.formfactors._quadrature", "_near_flags_loop"),
+    ("radiosity.formfactors._lambert", "_quadrature_source_kernel"),
     ("radiosity.visibility._ray_kernel", "segment_fractions"),
     ("radiosity.visibility._exact_kernel", "exact_pairs"),
 )

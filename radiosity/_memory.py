@@ -298,7 +298,7 @@ def plan_fill_block(n_patches: int, *, budget: int | None = None, max_pairs: int
     >>> plan_fill_block(18_000, budget=200 << 20)
     119552
     """
-    from .assembly import FILL_PAIRS
+    from .methods.uniform.assembly import FILL_PAIRS
 
     if budget is None:
         budget = budget_bytes()[0]

@@ -32,7 +32,7 @@ DROP_FACTOR = 1e-12
 # Fraction of the machine's memory a single allocation plan may use before we refuse.
 MEMORY_FRACTION = 0.7
 
-# --- Form-factor kernels (radiosity/formfactors.py, quadrature.py) ---------------------------
+# --- Form-factor kernels (radiosity/formfactors/) ---------------------------
 
 # A receiver whose distance to the source's reference vertex exceeds this multiple of the source's
 # radius (around that vertex) uses the cancellation-free "far" edge sum: the reference term

@@ -43,7 +43,7 @@ class Options:
         Reuse form factors stored on disk for the same geometry and accuracy settings.
     workers : int or None
         Fill the view-factor matrix on a local Dask cluster of this many processes
-        (:mod:`radiosity.cluster`; needs ``radiosity[cluster]``). None: in this process.
+        (:mod:`radiosity.methods.uniform.cluster`; needs ``radiosity[cluster]``). None: in this process.
     scheduler : str or None
         Fill it on the running Dask cluster at this address (``tcp://host:8786``) instead.
     """

@@ -12,12 +12,12 @@ import scipy.sparse as sp
 
 from . import _memory
 from ._errors import RadiosityWarning
-from .assembly import FillSettings, FillStats, assemble
-from .cache import FormFactorCache
+from .methods.uniform.assembly import FillSettings, FillStats, assemble
+from .methods.uniform.cache import FormFactorCache
 from .options import PRESETS, Options
 from .scene import Scene
 from .solution import Solution
-from .system import energy_balance, solve_system
+from .methods.uniform.system import energy_balance, solve_system
 from .visibility import Visibility
 
 __all__ = ["solve", "view_factors", "compute_view_factors", "write_view_factors", "prepare"]
@@ -100,8 +100,8 @@ def prepare(scene: Scene, options: Options) -> Prepared:
 
 
 def _prepare_on_cluster(cut, settings, inactive, options, cache, key, timings) -> Prepared:
-    """The fill of :func:`prepare` with its row blocks as Dask tasks (:mod:`radiosity.cluster`)."""
-    from .cluster import FillProblem, cluster_client, fill_matrix
+    """The fill of :func:`prepare` with its row blocks as Dask tasks (:mod:`radiosity.methods.uniform.cluster`)."""
+    from .methods.uniform.cluster import FillProblem, cluster_client, fill_matrix
 
     problem = FillProblem.from_scene(cut, settings, ~inactive)
     update, close = _progress_bar(options.progress, cut.n_patches, "form factors")
@@ -207,11 +207,11 @@ def write_view_factors(scene: Scene, path, *, preset: str = "default", pairs_per
     from the memory budget, ``RADIOSITY_MEMORY_BUDGET``), and each is written to its shard as
     soon as it is computed. Same options as :func:`view_factors` (``workers=`` or
     ``scheduler=`` fill the blocks on a Dask cluster), except ``enforce``: the shards hold the
-    matrix as filled. See :mod:`radiosity.shards`.
+    matrix as filled. See :mod:`radiosity.methods.uniform.shards`.
 
     Returns
     -------
-    radiosity.shards.ShardedViewFactors
+    radiosity.methods.uniform.shards.ShardedViewFactors
         The lazy matrix, as :func:`radiosity.load_view_factors` reads it back.
 
     Examples
@@ -223,8 +223,8 @@ def write_view_factors(scene: Scene, path, *, preset: str = "default", pairs_per
     ...     F.shape, bool(np.allclose(F @ np.ones(24), 1.0, atol=1e-6))
     ((24, 24), True)
     """
-    from .cluster import FillProblem, cluster_client
-    from .shards import write_shards
+    from .methods.uniform.cluster import FillProblem, cluster_client
+    from .methods.uniform.shards import write_shards
 
     options = _view_factor_options(preset, {**overrides, "cache": False})
     cut = _cut(scene, options)

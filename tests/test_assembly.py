@@ -10,9 +10,9 @@ from helpers import BLOCKED_PARALLEL_SQUARES, PARALLEL_SQUARES, write_obj
 pytest.importorskip("embreex")
 
 import radiosity  # noqa: E402
-from radiosity.assembly import FillSettings, assemble  # noqa: E402
+from radiosity.methods.uniform.assembly import FillSettings, assemble  # noqa: E402
 from radiosity.formfactors import polygon_normals  # noqa: E402
-from radiosity.quadrature import centroids_and_areas  # noqa: E402
+from radiosity.formfactors._quadrature import centroids_and_areas  # noqa: E402
 from radiosity.visibility import Visibility  # noqa: E402
 
 HALF_BLOCKED = PARALLEL_SQUARES[1.0] / 2  # a half-plane blocker at mid-height hides half, by symmetry
@@ -197,7 +197,7 @@ def test_fill_classifies_each_pair_once_for_both_directions(mode, monkeypatch):
     vis = Visibility(quads, normals, groups, 1.8, samples=2, max_samples=4)
     F, stats = assemble(quads, normals, centroid, area, vis, settings)
     assert stats.n_traced_pairs > 0 and stats.n_blocked_pairs > 0
-    from radiosity.assembly import candidate_pairs, unoccluded_factors
+    from radiosity.methods.uniform.assembly import candidate_pairs, unoccluded_factors
 
     i, j = candidate_pairs(quads, normals, centroid, np.arange(len(quads)))
 
@@ -247,7 +247,7 @@ def test_facing_pairs_loop_matches_numpy():
     facing patches of the boxes scene, and random patches, give the same pairs."""
     from test_visibility import boxes_scene
 
-    from radiosity import assembly
+    from radiosity.methods.uniform import assembly
 
     rng = np.random.default_rng(7)
     random_quads = rng.uniform(-1, 1, (60, 1, 3)) + 0.3 * rng.normal(size=(60, 4, 3))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 import radiosity
-from radiosity.cache import FormFactorCache
+from radiosity.methods.uniform.cache import FormFactorCache
 
 
 def cornell():

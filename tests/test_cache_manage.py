@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from radiosity.assembly import FillSettings, FillStats
-from radiosity.cache import FormFactorCache, cache_dir
+from radiosity.methods.uniform.assembly import FillSettings, FillStats
+from radiosity.methods.uniform.cache import FormFactorCache, cache_dir
 from radiosity.cli import main
 
 
@@ -50,7 +50,7 @@ def test_the_entry_just_written_is_kept_even_over_the_cap(tmp_path):
 
 
 def test_cache_size_from_the_environment(tmp_path, monkeypatch):
-    from radiosity.cache import cache_limit
+    from radiosity.methods.uniform.cache import cache_limit
 
     monkeypatch.setenv("RADIOSITY_CACHE_SIZE", "500M")
     assert cache_limit() == 500 * 2**20

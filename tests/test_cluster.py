@@ -13,8 +13,8 @@ pytest.importorskip("embreex")
 distributed = pytest.importorskip("distributed")
 
 import radiosity  # noqa: E402
-from radiosity import cluster  # noqa: E402
-from radiosity.assembly import FillSettings, assemble  # noqa: E402
+from radiosity.methods.uniform import cluster  # noqa: E402
+from radiosity.methods.uniform.assembly import FillSettings, assemble  # noqa: E402
 
 PAIRS = 3000  # pairs per block: the small scene becomes a few dozen tasks
 
@@ -92,7 +92,7 @@ def test_a_block_lost_with_its_worker_is_run_again(client, problem, local):
         if not killed:
             os.kill(pids[0], signal.SIGKILL)
             killed = True
-    from radiosity.assembly import coo_parts_to_csr
+    from radiosity.methods.uniform.assembly import coo_parts_to_csr
 
     assert all(p is not None for p in parts)
     assert pids[0] not in client.run(os.getpid).values()  # the worker did die mid-run

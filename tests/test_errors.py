@@ -222,7 +222,7 @@ def test_staged_outputs(tmp_path):
 # --- the form-factor cache under Ctrl-C ---------------------------------------------------
 
 def test_interrupted_cache_write_leaves_no_entry(tmp_path, monkeypatch):
-    from radiosity import cache as cache_module
+    from radiosity.methods.uniform import cache as cache_module
 
     monkeypatch.setenv("RADIOSITY_CACHE", str(tmp_path / "cache"))
     scene = radiosity.load_scene(DATA / "room.obj")

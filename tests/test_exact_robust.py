@@ -16,7 +16,7 @@ import shapely
 from shapely.errors import GEOSException
 
 import radiosity
-import radiosity.visibility as visibility
+import radiosity.visibility._pairs as visibility
 from radiosity.visibility import _exact
 
 pytest.importorskip("embreex")

@@ -10,7 +10,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import radiosity
-from radiosity.formfactors import _lambert_numpy, lambert_indexed, lambert_pairs, polygon_to_polygon
+from radiosity.formfactors import lambert_indexed, lambert_pairs, polygon_to_polygon
+from radiosity.formfactors._closed_form import _lambert_numpy
 import helpers
 from helpers import (PARALLEL_SQUARES, UNIT_SQUARE, WALL_X0, corner_point_factor, parallel_rectangles_mp,
                      perpendicular_rectangles_mp, regular_polygon, square_at)
@@ -85,7 +86,7 @@ def test_atan2_matches_numpy():
     arguments spanning eleven decades, both signs of x."""
     from numba import njit
 
-    from radiosity._lambert import _atan2p
+    from radiosity.formfactors._lambert import _atan2p
 
     @njit
     def kernel_atan2(y, x):
@@ -119,7 +120,7 @@ def _mixed_pairs(m, rng):
 def test_block_kernel_matches_scalar_kernel():
     """The SIMD block kernel (near and far lanes by select, triangle blocks with 3 vertices)
     against the scalar per-pair kernel on the same pairs."""
-    from radiosity._lambert import _ff_point
+    from radiosity.formfactors._lambert import _ff_point
 
     rng = np.random.default_rng(5)
     pts, nrm, polys = _mixed_pairs(3000, rng)

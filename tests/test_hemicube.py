@@ -1,4 +1,4 @@
-"""Hemicube / Nusselt-disk estimator (radiosity.hemicube): exact texel weights, convergence."""
+"""Hemicube / Nusselt-disk estimator (radiosity.alternatives.hemicube): exact texel weights, convergence."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from radiosity import hemicube
+from radiosity.alternatives import hemicube
 from radiosity.formfactors import point_to_polygon
 
 # Point under the corner of a unit square at height 1 (Howell): (1/2pi) * 2 * atan(1/sqrt 2)/sqrt 2.

@@ -18,12 +18,12 @@ def test_every_kernel_is_cached_on_disk():
     numba = pytest.importorskip("numba")
     from numba.core.registry import CPUDispatcher
 
-    import radiosity._lambert
-    import radiosity.quadrature
+    import radiosity.formfactors._lambert
+    import radiosity.formfactors._quadrature
     import radiosity.visibility._exact_kernel
     import radiosity.visibility._ray_kernel
 
-    modules = (radiosity._lambert, radiosity.quadrature, radiosity.visibility._exact_kernel,
+    modules = (radiosity.formfactors._lambert, radiosity.formfactors._quadrature, radiosity.visibility._exact_kernel,
                radiosity.visibility._ray_kernel)
     kernels = [v for m in modules for v in vars(m).values() if isinstance(v, CPUDispatcher)]
     assert len(kernels) > 20 and numba

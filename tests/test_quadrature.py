@@ -1,11 +1,11 @@
-"""Tests of radiosity.quadrature: Gauss rules on patches and the adaptive pair_factors."""
+"""Tests of radiosity.formfactors._quadrature: Gauss rules on patches and the adaptive pair_factors."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from radiosity.quadrature import centroids_and_areas, pair_factors, patch_points, split_patch_points
+from radiosity.formfactors._quadrature import centroids_and_areas, pair_factors, patch_points, split_patch_points
 
 
 def closed_cube(nd):

@@ -1,4 +1,4 @@
-"""Adaptive refinement of near pairs (radiosity.quadrature.pair_factors) against closed forms.
+"""Adaptive refinement of near pairs (radiosity.formfactors._quadrature.pair_factors) against closed forms.
 
 References are exact: Howell's aligned parallel rectangles (C-11), parallel rectangles in general
 position (the four-fold sum of C-12), perpendicular rectangles with a common edge (C-14), and,
@@ -15,7 +15,7 @@ import pytest
 
 from radiosity import polygon_to_polygon
 from helpers import parallel_rectangles_mp as parallel, perpendicular_rectangles_mp as perpendicular
-from radiosity.quadrature import _rect_points_numpy, centroids_and_areas, gauss_legendre_01, pair_factors, rect_points
+from radiosity.formfactors._quadrature import _rect_points_numpy, centroids_and_areas, gauss_legendre_01, pair_factors, rect_points
 
 mp.mp.dps = 30
 

@@ -1,11 +1,11 @@
-"""The compiled per-pair setup loops of radiosity.quadrature against their numpy references."""
+"""The compiled per-pair setup loops of radiosity.formfactors._quadrature against their numpy references."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from radiosity import quadrature as Q
+from radiosity.formfactors import _quadrature as Q
 
 pytestmark = pytest.mark.skipif(not Q._HAVE_NUMBA, reason="the loops are the numpy references without numba")
 

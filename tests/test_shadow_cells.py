@@ -17,7 +17,7 @@ from helpers import BLOCKED_PARALLEL_SQUARES
 
 pytest.importorskip("embreex")
 
-from radiosity.assembly import FillSettings  # noqa: E402
+from radiosity.methods.uniform.assembly import FillSettings  # noqa: E402
 from test_assembly import fill, grid, plate_total  # noqa: E402
 
 BLOCKER = (0.25, 0.75)  # the blocker's x and y range, at height 0.5

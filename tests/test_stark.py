@@ -1,4 +1,4 @@
-"""Stark's vertex-based formulations (radiosity._stark) against the Lambert kernel.
+"""Stark's vertex-based formulations (radiosity.alternatives._stark) against the Lambert kernel.
 
 Agreement is asserted as |F - F_lambert| <= RTOL * F_lambert + ATOL: the formulations add
 O(1) terms whose sum is F, so tiny form factors (a sliver above the plane) carry an absolute
@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from radiosity import _stark
+from radiosity.alternatives import _stark
 from radiosity.formfactors import lambert_pairs, point_to_polygon
 
 RTOL = 1e-12

@@ -11,7 +11,7 @@ import pytest
 pytest.importorskip("embreex")
 
 import radiosity  # noqa: E402
-from radiosity.assembly import FillSettings  # noqa: E402
+from radiosity.methods.uniform.assembly import FillSettings  # noqa: E402
 from test_assembly import fill  # noqa: E402
 
 FLOOR = np.array([[[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]], float)  # faces +z

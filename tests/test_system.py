@@ -9,7 +9,7 @@ import trimesh
 
 import radiosity
 from helpers import write_obj
-from radiosity.system import SOLVERS, energy_balance, progressive, solve_system
+from radiosity.methods.uniform.system import SOLVERS, energy_balance, progressive, solve_system
 
 
 def random_enclosure(n: int, seed: int = 0):
@@ -117,7 +117,7 @@ def closed_box_near_white(n: int = 24):
 @pytest.mark.parametrize("method", ["progressive", "jacobi"])
 def test_a_solver_that_stops_at_its_cap_says_so_and_falls_back(method, monkeypatch):
     """Issue 19: progressive stopped at 50 n shots with B = 97 instead of 1000, exit 0."""
-    import radiosity.system as system
+    import radiosity.methods.uniform.system as system
 
     F, area, rho, e = closed_box_near_white()
     if method == "jacobi":  # cap the sweeps far below what rho = 0.999 needs
@@ -139,7 +139,7 @@ def test_a_converged_solve_reports_no_fallback():
 
 
 def test_a_system_no_solver_can_solve_is_refused(monkeypatch):
-    import radiosity.system as system
+    import radiosity.methods.uniform.system as system
 
     F, area, rho, e = closed_box_near_white()
     monkeypatch.setattr(system, "_relative_residual", lambda A, b, x: 1.0)

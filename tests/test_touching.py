@@ -11,7 +11,7 @@ from helpers import PARALLEL_SQUARES
 
 pytest.importorskip("embreex")
 
-from radiosity.assembly import FillSettings  # noqa: E402
+from radiosity.methods.uniform.assembly import FillSettings  # noqa: E402
 from test_assembly import fill, grid  # noqa: E402
 
 TIGHT = FillSettings(formfactor_rtol=1e-6, visibility_rtol=1e-6)  # view_factors' defaults

@@ -237,7 +237,7 @@ def test_union_by_inclusion_exclusion_matches_shapely(monkeypatch, max_union):
 
 
 def test_exact_fraction_falls_back_to_shapely_unions(monkeypatch):
-    import radiosity.visibility as visibility
+    import radiosity.visibility._pairs as visibility
 
     quads, groups = boxes_scene()
     i, j = all_pairs(len(quads))

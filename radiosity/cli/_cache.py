@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..cache import ENV_SIZE, FormFactorCache
+from ..methods.uniform.cache import ENV_SIZE, FormFactorCache
 from .._memory import format_bytes
 
 NAME = "cache"

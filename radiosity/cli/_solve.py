@@ -17,7 +17,7 @@ from ..io.html import write_html
 from ..io._text import decode, excerpt, parse_float, read_input, split_lines
 from ..io.obj import MAX_COORDINATE
 from ..solve import solve
-from ..system import DIRECT_MAX
+from ..methods.uniform.system import DIRECT_MAX
 from ..viz import auto_exposure, white_balanced
 from ._common import add_camera_arg, add_scene_args, load, overrides, unit_scale
 from ._record import run_record

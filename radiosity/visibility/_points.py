@@ -92,7 +92,7 @@ class SensorGather:
 
     def __init__(self, quads: np.ndarray, normals: np.ndarray, groups: np.ndarray, scale: float,
                  radiosity: np.ndarray, inner: Occluders | None = None):
-        from . import occluder_mask
+        from ._pairs import occluder_mask
 
         self.quads = np.ascontiguousarray(quads, dtype=np.float64)
         self.normals = np.ascontiguousarray(normals, dtype=np.float64)

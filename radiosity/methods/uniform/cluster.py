@@ -1,6 +1,6 @@
 """The view-factor fill in row blocks, in process or on a Dask cluster.
 
-The fill's unit of work is :func:`radiosity.assembly.fill_block`: the pairs (i, j > i) of a
+The fill's unit of work is :func:`radiosity.methods.uniform.assembly.fill_block`: the pairs (i, j > i) of a
 range of rows and their mirrors. A block's result depends only on the geometry, the settings
 and its rows, so F is the same bit for bit however the blocks are scheduled: in this process,
 on a local cluster (``workers=N``, a ``dask.distributed.LocalCluster`` of N processes) or on a
@@ -87,13 +87,13 @@ class FillProblem:
 
     def visibility(self):
         """A new Visibility for these patches (what ``solve.prepare`` builds in process)."""
-        from .visibility import Visibility
+        from ...visibility import Visibility
 
         return Visibility(self.quads, self.normals, self.groups, self.scale,
                           samples=self.settings.visibility_samples, max_samples=self.settings.visibility_max_samples)
 
     def block(self, visibility, start: int, stop: int):
-        """:func:`radiosity.assembly.fill_block` of rows ``start:stop``."""
+        """:func:`radiosity.methods.uniform.assembly.fill_block` of rows ``start:stop``."""
         return fill_block(self.quads, self.normals, self.centroid, self.area, visibility, self.settings, start, stop,
                           active=self.active)
 

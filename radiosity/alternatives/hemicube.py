@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._validate import as_points, as_unit_vectors
+from .._validate import as_points, as_unit_vectors
 
 __all__ = ["hemicube_factors", "delta_form_factors", "texel_solid_angles"]
 
@@ -108,7 +108,7 @@ def delta_form_factors(resolution: int, *, method: str = "hemicube") -> list[np.
     Examples
     --------
     >>> import numpy as np
-    >>> from radiosity.hemicube import delta_form_factors
+    >>> from radiosity.alternatives.hemicube import delta_form_factors
     >>> top, side = delta_form_factors(64)
     >>> bool(abs(top.sum() + 4 * side.sum() - 1.0) < 1e-14)
     True
@@ -143,7 +143,7 @@ def texel_solid_angles(resolution: int) -> list[np.ndarray]:
     Examples
     --------
     >>> import numpy as np
-    >>> from radiosity.hemicube import texel_solid_angles
+    >>> from radiosity.alternatives.hemicube import texel_solid_angles
     >>> top, side = texel_solid_angles(8)
     >>> bool(abs(top.sum() + 4 * side.sum() - 2 * np.pi) < 1e-13)
     True
@@ -285,7 +285,7 @@ def hemicube_factors(point, normal, polygons, resolution: int, *, method: str = 
     Howell's point under the corner of a unit square at height 1 (F = 0.1385316060):
 
     >>> import numpy as np
-    >>> from radiosity.hemicube import hemicube_factors
+    >>> from radiosity.alternatives.hemicube import hemicube_factors
     >>> square = [[0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]]
     >>> f = hemicube_factors([0, 0, 0], [0, 0, 1], [square], 64)
     >>> round(float(f[0]), 10)

@@ -35,7 +35,7 @@ DEFAULT_LIMIT = 2 << 30  # 2 GiB: a few hundred Cornell-box-sized matrices, a ha
 
 def cache_limit() -> int:
     """Bytes the cache may hold: ``$RADIOSITY_CACHE_SIZE`` (``500M``, ``4G``, bytes) or 2 GiB."""
-    from ._memory import _parse_bytes
+    from ..._memory import _parse_bytes
 
     text = os.environ.get(ENV_SIZE)
     if not text:

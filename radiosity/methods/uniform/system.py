@@ -9,7 +9,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ._errors import RadiosityError, RadiosityWarning
+from ..._errors import RadiosityError, RadiosityWarning
 
 __all__ = ["SolverReport", "solve_system", "energy_balance", "SOLVERS"]
 
@@ -135,7 +135,7 @@ def _fall_back(method, F, r, e, area, A, rtol) -> tuple[np.ndarray, str, float]:
         if other == method:
             continue
         if other == "direct":
-            from . import _memory
+            from ... import _memory
 
             _memory.check_solve(A.shape[0], A.nnz, "direct")
         x, _ = _first_attempt(other, F, r, e, area, A, rtol)

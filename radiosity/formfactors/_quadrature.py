@@ -421,7 +421,7 @@ def _weighted_means(pts, nrm, w, slot, sources, j, mode):
     ``pts`` (u, nq, 3) and ``w`` (u, nq) are the points and weights of u receiver pieces,
     ``nrm`` (u, 3) their normals; ``slot`` and ``j`` (t,) pick a piece and a source per pair.
     """
-    from .formfactors import HAVE_NUMBA, _MODES, _quadrature_kernel, _quadrature_source_kernel, lambert_pairs
+    from ._closed_form import HAVE_NUMBA, _MODES, _quadrature_kernel, _quadrature_source_kernel, lambert_pairs
 
     out = np.empty(len(slot))
     nq = pts.shape[1]
@@ -541,7 +541,7 @@ def _piece_integrals(quads, normals, sources, rec, src, rects, frame, frames, or
     """Integrals of F(x -> sources[src]) over rectangles of frames ``frames[frame]`` (0 is the
     identity) of receivers ``rec``, and the rectangles' areas. ``orders`` are the Gauss orders
     in the identity frame and in the others."""
-    from . import _tol
+    from .. import _tol
 
     out, area = np.empty(len(rec)), np.empty(len(rec))
     for rows, order in zip((np.flatnonzero(frame == 0), np.flatnonzero(frame != 0)), orders):
@@ -864,7 +864,7 @@ def _estimates(q, h):
 def _forced_near_misses(quads, sources, i, j, height, pair, frame, rects, frames, collapsed):
     """(n,) u and v masks of :func:`_forced_splits` for pieces of near-miss pairs; ``collapsed``
     (m,) marks pairs whose receiver is a triangle with a touching vertex on its collapsed corner."""
-    from . import _tol
+    from .. import _tol
 
     # a layer widening from a touching vertex (an edge rising from it) looks the same at every
     # distance from the vertex: cutting towards it (along v in its Duffy frame, or in a receiver
@@ -887,7 +887,7 @@ def _adaptive_factors(quads, normals, sources, i, j, *, rtol, cap, size, mode):
     source radius). Returns the factors (m,), the receiver points evaluated per pair (m,) and
     whether each pair's error estimate met ``rtol * F + PAIR_ATOL`` (m,).
     """
-    from . import _tol
+    from .. import _tol
 
     m = len(i)
     order = min(_adapt_order(rtol), max(1, int(np.sqrt(cap.min() / 5))))  # the first estimate fits
@@ -951,7 +951,7 @@ def _clipped_receivers(quads, normals, srcs, i, j, height, *, rtol, max_points, 
     fanned into triangles, and each triangle is integrated as a receiver of its own; the
     results are combined by area.
     """
-    from .formfactors import _clip_to_upper
+    from ._closed_form import _clip_to_upper
 
     slots = _clip_to_upper(quads[i], height)  # (m, 8, 3), removed slots repeat a kept vertex
     k = slots.shape[1]
@@ -976,7 +976,7 @@ def _clipped_receivers(quads, normals, srcs, i, j, height, *, rtol, max_points, 
 
 
 def _src_normals(polys: np.ndarray) -> np.ndarray:
-    from .formfactors import polygon_normals
+    from ._closed_form import polygon_normals
 
     return polygon_normals(polys)
 
@@ -1047,7 +1047,7 @@ def pair_factors(quads, normals, centroid, area, i, j, *, rtol: float = 1e-6, so
     Two perpendicular unit squares sharing an edge (Howell C-14), 0.2000437761:
 
     >>> import numpy as np
-    >>> from radiosity.quadrature import centroids_and_areas, pair_factors
+    >>> from radiosity.formfactors._quadrature import centroids_and_areas, pair_factors
     >>> floor = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]
     >>> wall = [[0, 0, 0], [0, 1, 0], [0, 1, 1], [0, 0, 1]]
     >>> quads = np.array([floor, wall], dtype=float)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _tol
+from .. import _tol
 
 _TWO_PI = 2.0 * np.pi
 

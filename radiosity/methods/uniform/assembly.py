@@ -14,9 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from . import _tol
-from .formfactors import lambert_pairs
-from .quadrature import pair_factors, patch_points
+from ... import _tol
+from ...formfactors._closed_form import lambert_pairs
+from ...formfactors._quadrature import pair_factors, patch_points
 
 __all__ = ["FillSettings", "FillStats", "candidate_pairs", "unoccluded_factors", "fill_block", "assemble"]
 
@@ -51,7 +51,7 @@ class FillSettings:
         more than this: when ``F_unoccluded / visibility_max_samples > visibility_rtol``. It is
         an absolute error per view factor, i.e. relative to a closed enclosure's row sum of 1.
     formfactor_rtol : float, default: 1e-6
-        Relative accuracy of each unoccluded factor (:func:`radiosity.quadrature.pair_factors`
+        Relative accuracy of each unoccluded factor (:func:`radiosity.formfactors._quadrature.pair_factors`
         picks the rule per pair: a-priori Gauss orders for separated pairs, a verified
         refinement ladder for near and touching ones).
     """
@@ -165,7 +165,7 @@ def _classify_both_ways(f, i, j, visibility, half):
     Whether an occluder blocks all, some or none of the segments between two patches does not
     depend on which one receives, so the mirror takes the same status and occluders.
     """
-    from .visibility import FREE
+    from ...visibility import FREE
 
     need = np.flatnonzero((f[:half] > 0) | (f[half:] > 0))
     status = np.full(len(f), FREE, np.int8)
@@ -183,8 +183,8 @@ def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettin
     ``half``: the pairs are ``(i, j)`` for t < half and their mirrors ``(j, i)`` after them,
     classified once for both.
     """
-    from .visibility import FULL, MAYBE
-    from .visibility._constants import MAX_CELL_OCCLUDERS, SHADOW_CELLS_BELOW, SHADOW_RTOL_SHARE
+    from ...visibility import FULL, MAYBE
+    from ...visibility._constants import MAX_CELL_OCCLUDERS, SHADOW_CELLS_BELOW, SHADOW_RTOL_SHARE
 
     nz = np.flatnonzero(f > 0)
     if half is None:
@@ -262,8 +262,8 @@ def fill_block(quads, normals, centroid, area, visibility, settings: FillSetting
                active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, FillStats]:
     """One block of the fill: the pairs (i, j > i) with i in rows ``start:stop``, and their mirrors.
 
-    The unit of work of :func:`assemble`, of the Dask tasks (:mod:`radiosity.cluster`) and of
-    the out-of-core writer (:mod:`radiosity.shards`): a block's result depends only on the
+    The unit of work of :func:`assemble`, of the Dask tasks (:mod:`radiosity.methods.uniform.cluster`) and of
+    the out-of-core writer (:mod:`radiosity.methods.uniform.shards`): a block's result depends only on the
     geometry, the settings and its rows, so however blocks are scheduled, F is the same bit for bit.
 
     Returns

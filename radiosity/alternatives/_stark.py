@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _tol
+from .. import _tol
 
 __all__ = ["receiver_frame", "image_plane", "image_plane_clipped", "clip_error_bound",
            "radius_for_error", "vertex_lambert", "homogeneous"]

@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _memory, _tol
+from .. import _memory, _tol
 from ._lambert import (HAVE_NUMBA, _lambert_indexed_kernel, _lambert_matrix_kernel,  # noqa: F401
                        _lambert_rows_kernel, _quadrature_kernel, _quadrature_source_kernel)
-from ._validate import as_points, as_polygon, as_unit_vectors
+from .._validate import as_points, as_polygon, as_unit_vectors
 
 __all__ = ["point_to_polygon", "point_to_polygons", "polygon_to_polygon"]
 
@@ -295,7 +295,7 @@ def _receiver_pieces(receiver: np.ndarray, normal: np.ndarray, source: np.ndarra
     """The receiver as (t, 4, 3) quadrature pieces: itself if it is a convex quad or a triangle,
     else its earcut triangles. A triangle's collapsed (Duffy) vertex is put on the vertex nearest
     the source, where a touching vertex makes the integrand singular: the collapse smooths it."""
-    from .quadrature import triangulate
+    from ._quadrature import triangulate
 
     k = len(receiver)
     if k == 4:
@@ -319,7 +319,7 @@ def polygon_to_polygon(receiver, source, *, rtol: float = 1e-6) -> float:
     """Unoccluded area-averaged form factor F(receiver -> source) between two planar polygons.
 
     The receiver is triangulated (earcut, so non-convex receivers work) and each piece is
-    integrated by :func:`radiosity.quadrature.pair_factors`: an a-priori Gauss order for
+    integrated by :func:`radiosity.formfactors._quadrature.pair_factors`: an a-priori Gauss order for
     well-separated pieces, otherwise adaptive refinement graded toward touching edges and
     corners until the error estimate meets ``rtol`` (see ``docs/formfactors.md``).
 
@@ -393,7 +393,7 @@ def _sides_of_plane(poly: np.ndarray, point: np.ndarray, normal: np.ndarray) -> 
 
 def _one_side(receiver: np.ndarray, normal: np.ndarray, source: np.ndarray, rtol: float) -> float:
     """F(receiver -> source) for a receiver on one side of the source's plane."""
-    from .quadrature import centroids_and_areas, pair_factors
+    from ._quadrature import centroids_and_areas, pair_factors
 
     quads = _receiver_pieces(receiver, normal, source)
     if len(quads) == 0:

@@ -1,7 +1,7 @@
 """View-factor matrices out of core: written block by block as they are filled, read lazily.
 
 A matrix that does not fit in memory is written as the fill computes it, one shard per row
-block of the fill (:func:`radiosity.assembly.fill_block`), into a folder::
+block of the fill (:func:`radiosity.methods.uniform.assembly.fill_block`), into a folder::
 
     F.shards/
         index.json        shape, nnz, format, and per shard: rows [start, stop), file, nnz
@@ -37,7 +37,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from . import _memory
+from ... import _memory
 from .assembly import FillStats, add_stats
 
 __all__ = ["FORMAT", "write_shards", "load_view_factors", "ShardedViewFactors"]
@@ -54,7 +54,7 @@ def _shard_name(k: int) -> str:
 def write_shards(problem, scene, path: str | os.PathLike, *, client=None, pairs_per_block: int | None = None,
                  progress: Callable[[int], None] | None = None, settings: dict | None = None
                  ) -> tuple["ShardedViewFactors", FillStats]:
-    """Fill ``problem`` (a :class:`radiosity.cluster.FillProblem`) into a shard folder at ``path``.
+    """Fill ``problem`` (a :class:`radiosity.methods.uniform.cluster.FillProblem`) into a shard folder at ``path``.
 
     Each block is written as soon as it is computed (in process, or as it comes back from
     ``client``'s cluster), so only one block's factors are ever in memory. The folder is built
@@ -63,7 +63,7 @@ def write_shards(problem, scene, path: str | os.PathLike, *, client=None, pairs_
 
     Parameters
     ----------
-    problem : radiosity.cluster.FillProblem
+    problem : radiosity.methods.uniform.cluster.FillProblem
     scene : Scene
         The scene ``problem`` was made from (its patches are stored with the shards).
     path : path-like
@@ -275,7 +275,7 @@ class ShardedViewFactors:
         radiosity.RadiosityError
             If a channel does not reach ``rtol`` within ``maxiter`` iterations.
         """
-        from ._errors import RadiosityError
+        from ..._errors import RadiosityError
 
         stored = None
         if reflectance is None or emission is None:

@@ -1,0 +1,33 @@
+"""Form factors: Lambert's closed form for points, adaptive quadrature for polygon pairs.
+
+The face of the form-factor stage. Private modules:
+
+- ``_closed_form``: point-to-polygon factors (Lambert's contour sum) and ``polygon_to_polygon``.
+- ``_quadrature``: quadrature points on patches and the adaptive per-pair integration
+  (``pair_factors``) that the uniform matrix method fills its matrix with.
+- ``_lambert``: the numba kernels of the contour sum (points x polygons, indexed pairs,
+  quadrature means).
+
+See ``docs/formfactors.md``.
+"""
+
+from ._closed_form import (lambert_indexed, lambert_pairs, point_to_polygon, point_to_polygons,
+                           polygon_normals, polygon_to_polygon)
+from ._quadrature import (centroids_and_areas, gauss_legendre_01, pair_factors, patch_points, rect_points,
+                          split_patch_points, triangulate)
+
+__all__ = [
+    "point_to_polygon",
+    "point_to_polygons",
+    "polygon_to_polygon",
+    "lambert_pairs",
+    "lambert_indexed",
+    "pair_factors",
+    "patch_points",
+    "split_patch_points",
+    "rect_points",
+    "gauss_legendre_01",
+    "centroids_and_areas",
+    "triangulate",
+    "polygon_normals",
+]

@@ -1,0 +1,548 @@
+"""Visibility between patches: which pairs can be blocked at all, and how much is blocked.
+
+Pairs are classified before any ray is traced (``_occluders``):
+
+1. A face lying on the convex hull of the scene can block only segments inside its own plane,
+   so only the other faces ("occluders") matter. Coplanar occluder patches of one object that
+   tile a convex polygon are merged into it.
+2. A bounding-volume hierarchy over the occluder polygons gives each pair the occluders whose
+   boxes meet the pair's joint box.
+3. Each (pair, occluder) is then decided exactly from the occluder's plane and the bundle of
+   the 16 vertex-to-vertex segments: free, fully blocking, or maybe.
+
+Pairs with a fully blocking occluder are 0; pairs with only free occluders are 1; the others
+("partial") get either stratified shadow rays, adaptive (``samples**4`` rays per pair, and
+``max_samples**4`` where those disagree), or exact shadows (``_exact``): the hidden part of the
+source is clipped by the occluders' cones from each receiver quadrature point and its Lambert
+form factor subtracted. A shadow ray is tested, in float64, only against the occluder polygons
+left undecided for its pair (``_ray_kernel``): no other polygon can block it. Embree casts rays
+against every patch only when culling is off (robustness tests).
+
+Classification, rays and exact shadows are compiled (numba) loops over pairs; the numpy
+versions (``Visibility._classify``, ``Visibility._trace_numpy``, ``_occluders.classify_rows_numpy``,
+``_exact._hidden_factors_shapely``) are the references the tests compare them with.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError
+
+from .. import _tol
+from ..formfactors._quadrature import patch_points
+from . import _occluders
+from ._constants import (CHUNK_CELL_PAIRS, CHUNK_CLASSIFY, CHUNK_SHADOWS, MAX_UNION, MAX_UNION_CELLS,
+                         PLANE_REL, RAY_TFAR_SHORT, WEIGHT_FLOOR_REL)
+from ._exact import hidden_factors, point_factors
+from ._occluders import FREE, FULL, MAYBE, build_occluders
+
+__all__ = ["Visibility", "occluder_mask", "FREE", "FULL", "MAYBE"]
+
+
+def occluder_mask(quads: np.ndarray, scale: float) -> np.ndarray:
+    """(n,) bool: patches that can block a segment between two other patches."""
+    points = quads.reshape(-1, 3)
+    try:
+        hull = ConvexHull(points)
+    except (QhullError, ValueError):
+        return np.zeros(len(quads), dtype=bool)  # flat scene: every pair is coplanar or open
+    planes = hull.equations  # (f, 4): n . x + d <= 0 inside
+    tol = 1e-7 * scale
+    dist = np.einsum("fc,nkc->nkf", planes[:, :3], quads) + planes[None, None, :, 3]
+    on_facet_plane = (np.abs(dist) <= tol).all(axis=1).any(axis=1)
+    return ~on_facet_plane
+
+
+def _gauss_table():
+    from ._cells_kernel import gauss_table
+
+    return gauss_table(8)
+
+
+def _hash_uniform(key: np.ndarray) -> np.ndarray:
+    """Uniform numbers in [0, 1) from uint64 keys (splitmix64): reproducible, order-free."""
+    z = key + np.uint64(0x9E3779B97F4A7C15)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    z = z ^ (z >> np.uint64(31))
+    return (z >> np.uint64(11)).astype(np.float64) / float(1 << 53)
+
+
+def stratified_points(quads: np.ndarray, samples: int, key: np.ndarray, salt: int
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Jittered stratified points on patches: one per cell of a samples x samples grid.
+
+    Parameters
+    ----------
+    quads : (m, 4, 3) float
+        Patches (triangles repeat their third vertex: the bilinear map becomes Duffy's).
+    samples : int
+        Cells per direction.
+    key : (m,) uint64
+        A key per row (e.g. the pair): the jitter is a hash of key, cell and ``salt``, so it is
+        the same however the rows are chunked, and differs between the two ends of a pair.
+    salt : int
+
+    Returns
+    -------
+    points : (m, samples**2, 3) float
+    weights : (m, samples**2) float
+        Area weights; they sum to each patch's area (up to the jitter's quadrature error).
+
+    Notes
+    -----
+    Symmetric point sets (Gauss nodes on both patches) aim many rays exactly at an occluder's
+    edge when patch and occluder edges line up, and Embree's watertight mode counts those as
+    hits: a bias of order 1/samples. Independent jitter removes it.
+    """
+    with np.errstate(over="ignore"):
+        cells = np.uint64(samples * samples)
+        base = (key.astype(np.uint64)[:, None] * cells + np.arange(samples * samples, dtype=np.uint64)[None, :])
+        base = base * np.uint64(8) + np.uint64(salt * 2)
+        ju = _hash_uniform(base)
+        jv = _hash_uniform(base + np.uint64(1))
+    a = np.repeat(np.arange(samples), samples)[None, :]
+    b = np.tile(np.arange(samples), samples)[None, :]
+    u = ((a + ju) / samples)[..., None]
+    v = ((b + jv) / samples)[..., None]
+    p0, p1, p2, p3 = (quads[:, k, None, :] for k in range(4))
+    points = (1 - u) * (1 - v) * p0 + u * (1 - v) * p1 + u * v * p2 + (1 - u) * v * p3
+    du = (1 - v) * (p1 - p0) + v * (p2 - p3)
+    dv = (1 - u) * (p3 - p0) + u * (p2 - p1)
+    weights = np.linalg.norm(np.cross(du, dv), axis=-1) / (samples * samples)
+    return points, weights
+
+
+def _occluder_lists(rows: np.ndarray, occ: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """(starts (m + 1,), occ sorted by row): pair p's occluders are ``occ[starts[p]:starts[p + 1]]``."""
+    srt = np.argsort(rows, kind="stable")
+    starts = np.zeros(m + 1, np.int64)
+    np.cumsum(np.bincount(rows, minlength=m), out=starts[1:])
+    return starts, np.ascontiguousarray(occ[srt], dtype=np.int64)
+
+
+def _subset_lists(starts: np.ndarray, occ: np.ndarray, sel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The occluder lists of pairs ``sel`` (in that order)."""
+    count = starts[sel + 1] - starts[sel]
+    new = np.zeros(len(sel) + 1, np.int64)
+    np.cumsum(count, out=new[1:])
+    idx = np.repeat(starts[sel] - new[:-1], count) + np.arange(new[-1])
+    return new, occ[idx]
+
+
+class Visibility:
+    """Fractional visibility between patches: exact classification, then rays or exact shadows.
+
+    Parameters
+    ----------
+    quads : (n, 4, 3) float
+        The patches; every one of them blocks light from both sides.
+    normals : (n, 3) float
+        Unit normals (front sides).
+    groups : (n,) int
+        The object index of each patch: coplanar occluder patches merge only within an object.
+    scale : float
+        Scene size, metres: ray ends are pulled off surfaces by a fixed fraction of it.
+    samples : int, default: 2
+        Sample points per direction on each patch for the first round of rays
+        (``samples**4`` rays per partly occluded pair).
+    max_samples : int, default: 4
+        Points per direction for pairs whose first-round rays disagree.
+    cull : bool, default: True
+        Classify pairs before tracing. ``False`` treats every patch as an occluder and every
+        pair as partly occluded (for robustness tests of the ray path).
+    """
+
+    def __init__(self, quads: np.ndarray, normals: np.ndarray, groups: np.ndarray, scale: float, *,
+                 samples: int = 2, max_samples: int = 4, cull: bool = True):
+        self.quads = quads
+        self.normals = normals
+        self.scale = scale
+        self.samples = samples
+        self.max_samples = max(max_samples, samples)
+        self.cull = cull
+        mask = occluder_mask(quads, scale) if cull else np.ones(len(quads), bool)
+        self.n_occluders = int(mask.sum())
+        self._occluder_patches = mask
+        self.occluders = build_occluders(quads, normals, np.asarray(groups), mask, scale)
+        self._lo = quads.min(axis=1)
+        self._hi = quads.max(axis=1)
+        self._tracer = None
+        self.n_rays = 0
+        self.n_exact_rows = 0
+        # receiver points whose shadow union GEOS could not compute directly (see _exact._unite)
+        self.union_fallbacks: dict[str, int] = {}
+
+    def union_note(self) -> str | None:
+        """A note counting the receiver points whose shadow union needed a fallback, or None."""
+        snapped = self.union_fallbacks.get("snapped", 0)
+        lost = self.union_fallbacks.get("lower_bound", 0)
+        if not snapped and not lost:
+            return None
+        note = (f"exact shadows: GEOS failed to unite the hidden polygons at {snapped + lost} receiver "
+                f"point(s) (degenerate overlaps); {snapped} were united again with snap-rounding")
+        if lost:
+            note += f", {lost} use their largest hidden polygon (a lower bound of the shadow)"
+        return note
+
+    # ------------------------------------------------------------------ classification
+    def classify(self, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Classify pairs (i receives from j) before any ray.
+
+        Returns
+        -------
+        status : (m,) int8
+            ``FREE`` (nothing blocks), ``FULL`` (some occluder blocks every segment) or
+            ``MAYBE`` (partly occluded).
+        rows, occluder : (t,) int
+            For the partly occluded pairs: the pair (index into i, j) and each occluder polygon
+            that may block it, sorted by pair.
+        """
+        if not self.cull:
+            return self._classify(self.quads[i], self.quads[j], np.minimum(self._lo[i], self._lo[j]),
+                                  np.maximum(self._hi[i], self._hi[j]))
+        return self._classify_pairs(self.quads, np.asarray(i), self.quads, np.asarray(j))
+
+    def _classify_pairs(self, va, ia, vb, ib):
+        """Compiled classification of pairs (va[ia], vb[ib]): BVH walk and exact test fused."""
+        from ._exact_kernel import classify_pairs
+
+        m = len(ia)
+        occ = self.occluders
+        if occ.n_occluders == 0 or m == 0:
+            return np.full(m, FREE, np.int8), np.zeros(0, np.int64), np.zeros(0, np.int64)
+        va = np.ascontiguousarray(va, dtype=np.float64)
+        vb = np.ascontiguousarray(vb, dtype=np.float64)
+        status = np.empty(m, np.int8)
+        rows, occs = [], []
+        for s in range(0, m, CHUNK_CLASSIFY):
+            e = min(m, s + CHUNK_CLASSIFY)
+            st, starts, k = classify_pairs(va, np.ascontiguousarray(ia[s:e], dtype=np.int64), vb,
+                                           np.ascontiguousarray(ib[s:e], dtype=np.int64), occ.polys, occ.normal,
+                                           occ.center, occ.inward, occ.lo, occ.hi, occ.node_lo, occ.node_hi,
+                                           occ.node_left, occ.node_right, occ.node_start, occ.node_count,
+                                           occ.order, PLANE_REL * self.scale, PLANE_REL * self.scale)
+            status[s:e] = st
+            rows.append(s + np.repeat(np.arange(e - s), np.diff(starts)))
+            occs.append(k)
+        return status, np.concatenate(rows), np.concatenate(occs)
+
+    def _classify(self, vi, vj, lo, hi):
+        """Reference classification in numpy (and the path for ``cull=False``)."""
+        m = len(vi)
+        status = np.full(m, FREE, np.int8)
+        pad = PLANE_REL * self.scale
+        rows, occ = _occluders.candidates(self.occluders, lo, hi, pad)
+        if self.cull and len(rows):
+            state = _occluders.classify_rows(self.occluders, vi[rows], vj[rows], occ, self.scale)
+            full = np.zeros(m, bool)
+            full[rows[state == FULL]] = True
+            maybe = state == MAYBE
+            rows, occ = rows[maybe], occ[maybe]
+            status[rows] = MAYBE
+            status[full] = FULL
+            keep = ~full[rows]
+            rows, occ = rows[keep], occ[keep]
+        elif not self.cull:
+            status[:] = MAYBE
+        return status, rows, occ
+
+    def needs_rays(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        """(m,) bool: pairs that are partly occluded (neither free nor fully blocked)."""
+        return self.classify(i, j)[0] == MAYBE
+
+    # ------------------------------------------------------------------ pair fractions
+    def fraction(self, i: np.ndarray, j: np.ndarray, *, exact: bool = False, order: int = 2) -> np.ndarray:
+        """(m,) visible fraction of each pair (i receives from j), kernel-weighted.
+
+        Parameters
+        ----------
+        i, j : (m,) int
+            Receiver and source patches.
+        exact : bool, default: False
+            Exact shadows at ``order**2`` Gauss points of the receiver instead of rays.
+        order : int, default: 2
+            Receiver points per direction for exact shadows.
+        """
+        status, rows, occ = self.classify(i, j)
+        out = np.where(status == FULL, 0.0, 1.0)
+        part = np.flatnonzero(status == MAYBE)
+        if len(part):
+            if exact:
+                local = np.full(len(i), -1)
+                local[part] = np.arange(len(part))
+                out[part] = self.exact_fraction(i[part], j[part], local[rows], occ, order)
+            else:
+                local = np.full(len(i), -1)
+                local[part] = np.arange(len(part))
+                out[part] = self.ray_fraction(i[part], j[part], rows=local[rows], occ=occ)
+        return out
+
+    def ray_fraction(self, i: np.ndarray, j: np.ndarray, samples: int | None = None,
+                     max_samples: int | None = None, *, rows: np.ndarray | None = None,
+                     occ: np.ndarray | None = None) -> np.ndarray:
+        """(m,) kernel-weighted unblocked fraction by stratified rays, refined where they disagree.
+
+        Each ray from a sample x on i to a sample y on j is weighted by the area weights of both
+        samples times the differential form factor cos_i cos_j / r^2, which is zero where y is
+        behind i's plane: rays never count the hidden part of a source that straddles the
+        receiver's horizon.
+
+        With culling on (the default), each ray is intersected only with the occluder polygons
+        that the classification left undecided for its pair (``rows``/``occ`` from
+        :meth:`classify`, with ``rows`` indexing i and j; classified here if not given), in
+        float64. With ``cull=False`` every ray is cast through Embree against every patch.
+        """
+        s0 = samples or self.samples
+        s1 = max(max_samples or self.max_samples, s0)
+        i = np.ascontiguousarray(i, dtype=np.int64)
+        j = np.ascontiguousarray(j, dtype=np.int64)
+        key = i.astype(np.uint64) * np.uint64(len(self.quads)) + j.astype(np.uint64)
+        lists = None
+        full = np.zeros(len(i), bool)
+        if self.cull:
+            if rows is None or occ is None:
+                status, rows, occ = self.classify(i, j)
+                full = status == FULL
+            lists = _occluder_lists(rows, occ, len(i))
+        frac, agree = self._patch_rays(i, j, s0, key, 1, lists)
+        if s1 > s0 and not agree.all():
+            redo = np.flatnonzero(~agree)
+            sub = None if lists is None else _subset_lists(*lists, redo)
+            frac[redo] = self._patch_rays(i[redo], j[redo], s1, key[redo], 3, sub)[0]
+        frac[full] = 0.0
+        return frac
+
+    def exact_fraction(self, i: np.ndarray, j: np.ndarray, rows: np.ndarray, occ: np.ndarray, order: int
+                       ) -> np.ndarray:
+        """(m,) visible fraction by exact shadows at ``order**2`` Gauss points of each receiver.
+
+        ``rows``/``occ`` list the occluder polygons that may block each pair (from
+        :meth:`classify`). The fraction is ``1 - sum_q w_q F(x_q -> hidden) / sum_q w_q F(x_q -> j)``.
+        """
+        from ._exact_kernel import exact_pairs
+
+        pts, w = patch_points(self.quads, order)
+        q = pts.shape[1]
+        out = np.ones(len(i))
+        srt = np.argsort(rows, kind="stable")
+        rows, occ = rows[srt], occ[srt]
+        ends = np.cumsum(np.bincount(rows, minlength=len(i)))
+        step = max(1, CHUNK_SHADOWS // q)
+        o = self.occluders
+        tol = PLANE_REL * self.scale
+        for s in range(0, len(i), step):
+            e = min(len(i), s + step)
+            a, b = (ends[s - 1] if s else 0), ends[e - 1]
+            starts = np.r_[0, ends[s:e] - a]
+            unocc, hidden, ok = exact_pairs(pts, self.normals, self.quads, np.ascontiguousarray(i[s:e]),
+                                            np.ascontiguousarray(j[s:e]), starts, occ[a:b], o.polys, o.normal,
+                                            tol, MAX_UNION)
+            self.n_exact_rows += (b - a) * q
+            if not ok.all():
+                hidden[~ok] = self._hidden_at(pts, i[s:e], j[s:e], starts, occ[a:b], ~ok)
+            hidden = np.minimum(hidden, unocc)
+            total = (unocc * w[i[s:e]]).sum(axis=1)
+            lost = (hidden * w[i[s:e]]).sum(axis=1)
+            out[s:e] = np.where(total > 0, 1.0 - lost / np.where(total > 0, total, 1.0), 1.0)
+        return out
+
+    def exact_hidden(self, i: np.ndarray, j: np.ndarray, rows: np.ndarray, occ: np.ndarray, rtol: float,
+                     unoccluded: np.ndarray, fallback_order: int = 3, max_points: int = 4096) -> np.ndarray:
+        """(m,) hidden part of partly occluded pairs, integrated over shadow-aligned receiver cells.
+
+        The mean over receiver i (its part in front of j's plane) of F(x -> part of j hidden
+        from x): the pair's obstructed factor is ``unoccluded - hidden``. The receiver is cut
+        along the lines where the hidden polygon changes shape (``_cells_kernel``), so each
+        cell's integrand is smooth and its Gauss rule (picked for ``rtol``, within about
+        ``max_points`` receiver points a pair) converges. Pairs
+        whose lines, cells or unions ran out fall back to :meth:`exact_fraction` at
+        ``fallback_order**2`` points, scaled by ``unoccluded`` (m,), the pairs' factors.
+        """
+        from ._cells_kernel import cell_pairs
+
+        i = np.ascontiguousarray(i, dtype=np.int64)
+        j = np.ascontiguousarray(j, dtype=np.int64)
+        hidden = np.zeros(len(i))
+        if not len(i):
+            return hidden
+        starts, occ_sorted = _occluder_lists(rows, occ, len(i))
+        gn, gw = _gauss_table()
+        o = self.occluders
+        bad = []
+        for s in range(0, len(i), CHUNK_CELL_PAIRS):
+            e = min(len(i), s + CHUNK_CELL_PAIRS)
+            sub_starts, sub_occ = _subset_lists(starts, occ_sorted, np.arange(s, e))
+            hidden[s:e], ok, n_points = cell_pairs(self.quads, self.normals, i[s:e], j[s:e], sub_starts, sub_occ,
+                                                   o.polys, o.normal, o.center, o.inward, PLANE_REL * self.scale,
+                                                   MAX_UNION_CELLS, float(rtol), int(max_points), gn, gw)
+            self.n_exact_rows += int(n_points.sum())
+            bad.append(s + np.flatnonzero(~ok))
+        bad = np.concatenate(bad)
+        if len(bad):
+            local = np.full(len(i), -1)
+            local[bad] = np.arange(len(bad))
+            keep = local[rows] >= 0
+            frac = self.exact_fraction(i[bad], j[bad], local[rows[keep]], occ[keep], fallback_order)
+            hidden[bad] = np.asarray(unoccluded)[bad] * (1.0 - frac)
+        return hidden
+
+    def _hidden_at(self, pts, i, j, starts, occ, where):
+        """Hidden form factors at the receiver points where the kernel left them (shapely unions)."""
+        p, a = np.nonzero(where)
+        count = np.diff(starts)[p]
+        r = np.repeat(np.arange(len(p)), count)
+        k = occ[np.repeat(starts[p], count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)]
+        return hidden_factors(pts[i[p[r]], a[r]], self.normals[i[p[r]]], r, self.quads[j[p[r]]],
+                              self.normals[j[p[r]]], self.occluders.polys[k], self.occluders.normal[k],
+                              PLANE_REL * self.scale, self.union_fallbacks)
+
+    # ------------------------------------------------------------------ points (final gather)
+    def point_fraction(self, points: np.ndarray, normals: np.ndarray, j: np.ndarray, *,
+                       exact: bool = False) -> np.ndarray:
+        """(m,) visible fraction of patch j seen from each receiver point (kernel-weighted).
+
+        Parameters
+        ----------
+        points, normals : (m, 3) float
+            Receiver points and unit normals.
+        j : (m,) int
+            Source patches.
+        exact : bool, default: False
+            Exact shadows instead of rays.
+        """
+        out = np.ones(len(j))
+        if self.occluders.n_occluders == 0 or len(j) == 0:
+            return out
+        vi = np.repeat(points[:, None, :], 4, axis=1)
+        if self.cull:
+            status, rows, occ = self._classify_pairs(vi, np.arange(len(j)), self.quads, np.asarray(j))
+        else:
+            status, rows, occ = self._classify(vi, self.quads[j], np.minimum(points, self._lo[j]),
+                                               np.maximum(points, self._hi[j]))
+        out[status == FULL] = 0.0
+        part = np.flatnonzero(status == MAYBE)
+        if not len(part):
+            return out
+        if exact:
+            local = np.full(len(j), -1)
+            local[part] = np.arange(len(part))
+            x, nx, jj = points[part], normals[part], j[part]
+            unocc = point_factors(x, nx, self.quads[jj])
+            r = local[rows]
+            hidden = np.zeros(len(part))
+            _, group = np.unique(r, return_inverse=True)
+            first = np.unique(r, return_index=True)[1]
+            hidden[r[first]] = hidden_factors(x[r], nx[r], group.ravel(), self.quads[jj[r]], self.normals[jj[r]],
+                                              self.occluders.polys[occ], self.occluders.normal[occ],
+                                              PLANE_REL * self.scale, self.union_fallbacks)
+            self.n_exact_rows += len(r)
+            out[part] = np.where(unocc > 0, 1.0 - np.minimum(hidden, unocc) / np.where(unocc > 0, unocc, 1.0), 1.0)
+        else:
+            ones = np.ones((len(part), 1))
+            key = np.arange(len(part), dtype=np.uint64)
+            local = np.full(len(j), -1)
+            local[part] = np.arange(len(part))
+            lists = _occluder_lists(local[rows], occ, len(part)) if self.cull else None
+            frac, _ = self._weighted_fraction(points[part][:, None, :], ones, normals[part], j[part],
+                                              self.samples, key, lists)
+            out[part] = frac
+        return out
+
+    # ------------------------------------------------------------------ rays
+    def _occluder(self):
+        """The Embree scene of the occluder patches (every patch with ``cull=False``).
+
+        Faces on the convex hull can block only segments in their own plane, and ray ends are
+        pulled off their surfaces into the hull, so leaving those faces out changes no answer
+        (the classification already ignores them) and makes each ray cheaper.
+        """
+        if self._tracer is None:
+            from ._embree import EmbreeOccluder
+
+            quads = self.quads[self._occluder_patches]
+            tris = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]], axis=0)
+            area = np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
+            self._tracer = EmbreeOccluder(tris[area > 0])
+        return self._tracer
+
+    def _patch_rays(self, i, j, samples, key, salt, lists=None):
+        """Fractions by rays between stratified samples of patches i (``salt``) and j, chunked.
+
+        ``lists``: (starts, occ), pair p's undecided occluders ``occ[starts[p]:starts[p + 1]]``
+        (segment tests); None: Embree against the occluder patches (all patches with ``cull=False``).
+        """
+        from ._ray_kernel import stratified_points as points
+
+        out = np.empty(len(j))
+        agree = np.empty(len(j), bool)
+        step = max(1, _tol.CHUNK_RAYS // samples**4)
+        for s in range(0, len(j), step):
+            e = min(len(j), s + step)
+            xs, wx = points(self.quads, i[s:e], samples, key[s:e], salt)
+            sub = None if lists is None else _subset_lists(*lists, np.arange(s, e))
+            out[s:e], agree[s:e] = self._trace(xs, wx, self.normals[i[s:e]], j[s:e], samples, key[s:e], sub)
+        return out, agree
+
+    def _weighted_fraction(self, receivers, receiver_weights, receiver_normals, j, samples, key, lists=None):
+        """Weighted unblocked fraction of rays from receivers (p, a, 3) to samples of j.
+
+        Returns the fraction and whether all rays that carry weight agreed.
+        """
+        out = np.empty(len(j))
+        agree = np.empty(len(j), bool)
+        per_pair = receivers.shape[1] * samples * samples
+        step = max(1, _tol.CHUNK_RAYS // per_pair)
+        j = np.ascontiguousarray(j, dtype=np.int64)
+        for s in range(0, len(j), step):
+            e = min(len(j), s + step)
+            sub = None if lists is None else _subset_lists(*lists, np.arange(s, e))
+            out[s:e], agree[s:e] = self._trace(np.ascontiguousarray(receivers[s:e], dtype=np.float64),
+                                               np.ascontiguousarray(receiver_weights[s:e], dtype=np.float64),
+                                               np.ascontiguousarray(receiver_normals[s:e], dtype=np.float64),
+                                               j[s:e], samples, key[s:e], sub)
+        return out, agree
+
+    def _trace(self, xs, wx, nx, j, samples, key, lists=None):
+        """Fraction and agreement of one chunk of pairs (compiled; see :meth:`_patch_rays`)."""
+        from ._ray_kernel import ray_fractions, segment_fractions, shadow_rays
+
+        if lists is not None:
+            o = self.occluders
+            starts, occ = lists
+            frac, agree, n_traced = segment_fractions(
+                xs, wx, nx, self.quads, self.normals, j, samples, key, 2, WEIGHT_FLOOR_REL,
+                _tol.RAY_OFFSET_REL * self.scale, 1.0 - RAY_TFAR_SHORT, starts, occ, o.polys, o.normal, o.center,
+                o.inward, PLANE_REL * self.scale)
+            self.n_rays += int(n_traced.sum())
+            return frac, agree
+        weight, starts, traced, origins, ends = shadow_rays(xs, wx, nx, self.quads, self.normals, j, samples, key,
+                                                            2, WEIGHT_FLOOR_REL, _tol.RAY_OFFSET_REL * self.scale)
+        blocked = self._occluder().occluded(origins, ends)
+        self.n_rays += len(origins)
+        return ray_fractions(weight, traced, starts, blocked)
+
+    def _trace_numpy(self, xs, wx, nx, j, samples, key):
+        """Reference for :meth:`_trace` in numpy (same rays, same weights)."""
+        ys, wy = stratified_points(self.quads[j], samples, key, 2)
+        ny = self.normals[j]
+        off = _tol.RAY_OFFSET_REL * self.scale
+        x = xs[:, :, None, :] + off * nx[:, None, None, :]
+        y = ys[:, None, :, :] + off * ny[:, None, None, :]
+        d = ys[:, None, :, :] - xs[:, :, None, :]
+        r2 = np.einsum("pabc,pabc->pab", d, d)
+        cos_i = np.einsum("pabc,pc->pab", d, nx)
+        cos_j = -np.einsum("pabc,pc->pab", d, ny)
+        weight = (wx[:, :, None] * wy[:, None, :] * np.clip(cos_i, 0, None) * np.clip(cos_j, 0, None)
+                  / np.maximum(r2, 1e-300) ** 2)
+        traced = weight > WEIGHT_FLOOR_REL * weight.max(axis=(1, 2), keepdims=True)
+        x, y = np.broadcast_arrays(x, y)
+        blocked = np.zeros(weight.shape, bool)
+        blocked[traced] = self._occluder().occluded(x[traced], y[traced])
+        total = weight.sum(axis=(1, 2))
+        visible = (weight * ~blocked).sum(axis=(1, 2))
+        n_traced = traced.sum(axis=(1, 2))
+        n_blocked = (blocked & traced).sum(axis=(1, 2))
+        agree = (n_blocked == 0) | (n_blocked == n_traced)
+        plain = 1.0 - n_blocked / np.maximum(n_traced, 1)
+        return np.where(total > 0, visible / np.where(total > 0, total, 1.0), plain), agree
