@@ -107,7 +107,8 @@ def main(argv=None):
     from radiosity import point_to_polygons, polygon_to_polygon
     from radiosity.formfactors import lambert_pairs
     from radiosity.formfactors._closed_form import _lambert_numpy
-    from radiosity.formfactors._quadrature import centroids_and_areas, pair_factors
+    from radiosity.formfactors._quadrature import pair_factors
+    from radiosity.geometry import centroids_and_areas
 
     rng = np.random.default_rng(0)
     m = 200_000 if args.quick else 2_000_000

@@ -26,8 +26,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from _common import parse_args, print_table, write_json  # noqa: E402
 
 from radiosity.methods.uniform.assembly import FillSettings, assemble  # noqa: E402
-from radiosity.formfactors import polygon_normals  # noqa: E402
-from radiosity.formfactors._quadrature import centroids_and_areas  # noqa: E402
+from radiosity.geometry import polygon_normals  # noqa: E402
+from radiosity.geometry import centroids_and_areas  # noqa: E402
 from radiosity.visibility import Visibility  # noqa: E402
 
 REFERENCE = 0.0995062946

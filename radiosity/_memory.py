@@ -270,9 +270,13 @@ def check_cut(quads: np.ndarray, max_patch_size: float, *, budget: int | None = 
     return n
 
 
+# Directed pairs per block of the fill (a block's pairs (i, j > i) and their mirrors): bounds the
+# per-pair temporaries of form factors and visibility (a few hundred bytes each).
+FILL_PAIRS = 2_000_000
+
 # Bytes per directed pair in flight in one fill block: form-factor quadrature temporaries,
 # visibility classification and occluder lists, and the block's (i, j, v) output (see
-# assembly.FILL_PAIRS, whose 2M directed pairs per block are a few hundred MB).
+# FILL_PAIRS, whose 2M directed pairs per block are a few hundred MB).
 BYTES_PER_BLOCK_PAIR = 400
 
 # Bytes per patch held for the whole out-of-core fill: the patch arrays, the occluders and their
@@ -298,8 +302,6 @@ def plan_fill_block(n_patches: int, *, budget: int | None = None, max_pairs: int
     >>> plan_fill_block(18_000, budget=200 << 20)
     119552
     """
-    from .methods.uniform.assembly import FILL_PAIRS
-
     if budget is None:
         budget = budget_bytes()[0]
     max_pairs = FILL_PAIRS // 2 if max_pairs is None else max_pairs

@@ -14,7 +14,7 @@ import numpy as np
 
 from . import _tol
 from ._ngon import GRADED_MIN_CORNERS, graded_pieces
-from .formfactors._quadrature import centroids_and_areas, triangulate
+from .geometry import centroids_and_areas, triangulate
 
 __all__ = ["Patches", "subdivide_faces"]
 

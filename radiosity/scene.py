@@ -15,11 +15,10 @@ from ._checks import duplicate_faces, material_notes
 from ._lightpaths import light_path_notes, trace_emitters
 from ._errors import RadiosityWarning, SceneError
 from ._validate import reject_unknown
-from .formfactors._closed_form import polygon_normals
+from .geometry import centroids_and_areas, polygon_normals
 from .io.obj import read_obj
 from .imprint import subdivide_imprinted
 from .patches import FaceReport, Patches, planar_parts, subdivide_faces
-from .formfactors._quadrature import centroids_and_areas
 
 __all__ = ["Scene", "load_scene", "bundled_scene"]
 

@@ -11,8 +11,8 @@ pytest.importorskip("embreex")
 
 import radiosity  # noqa: E402
 from radiosity.methods.uniform.assembly import FillSettings, assemble  # noqa: E402
-from radiosity.formfactors import polygon_normals  # noqa: E402
-from radiosity.formfactors._quadrature import centroids_and_areas  # noqa: E402
+from radiosity.geometry import polygon_normals  # noqa: E402
+from radiosity.geometry import centroids_and_areas  # noqa: E402
 from radiosity.visibility import Visibility  # noqa: E402
 
 HALF_BLOCKED = PARALLEL_SQUARES[1.0] / 2  # a half-plane blocker at mid-height hides half, by symmetry

@@ -338,7 +338,8 @@ def test_near_plane_receivers_are_backward_stable(k, log_height, tilt, seed):
 def test_fill_mode_leaves_out_only_sub_1e16_grazing_error():
     """pair_factors(mode="fill") (the matrix fill) skips the grazing forms: on nearly coplanar
     plates and a thin strip its factors differ from mode "auto" by less than 1e-16 absolute."""
-    from radiosity.formfactors._quadrature import centroids_and_areas, pair_factors
+    from radiosity.formfactors._quadrature import pair_factors
+    from radiosity.geometry import centroids_and_areas
 
     for eps in (1e-8, 1e-6, 1e-4):
         lower = SQUARE.copy()

@@ -11,7 +11,7 @@ import shapely
 import radiosity
 from radiosity.imprint import CONTACT_REL, convex_pieces, imprint_faces, subdivide_imprinted
 from radiosity.io.obj import read_obj
-from radiosity.formfactors._quadrature import centroids_and_areas
+from radiosity.geometry import centroids_and_areas
 
 from helpers import write_obj
 

@@ -11,7 +11,7 @@ from hypothesis import given, settings, strategies as st
 import radiosity
 from radiosity._ngon import GRADED_MIN_CORNERS, graded_pieces
 from radiosity.patches import subdivide_faces
-from radiosity.formfactors._quadrature import centroids_and_areas
+from radiosity.geometry import centroids_and_areas
 
 from helpers import COAXIAL_DISKS, regular_polygon, write_obj
 

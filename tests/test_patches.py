@@ -7,9 +7,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from radiosity.formfactors import polygon_normals
+from radiosity.geometry import polygon_normals
 from radiosity.patches import Patches, planar_parts, subdivide_faces
-from radiosity.formfactors._quadrature import centroids_and_areas
+from radiosity.geometry import centroids_and_areas
 
 
 def _area(poly: np.ndarray) -> float:

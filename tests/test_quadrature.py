@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from radiosity.formfactors._quadrature import centroids_and_areas, pair_factors, patch_points, split_patch_points
+from radiosity.formfactors._quadrature import pair_factors, patch_points, split_patch_points
+from radiosity.geometry import centroids_and_areas
 
 
 def closed_cube(nd):

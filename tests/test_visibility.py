@@ -10,7 +10,7 @@ from helpers import corner_point_factor
 pytest.importorskip("embreex")
 
 from radiosity import _tol  # noqa: E402
-from radiosity.formfactors import polygon_normals  # noqa: E402
+from radiosity.geometry import polygon_normals  # noqa: E402
 from radiosity.visibility import FREE, FULL, MAYBE, Visibility  # noqa: E402
 from radiosity.visibility._embree import EmbreeOccluder  # noqa: E402
 from radiosity.visibility._occluders import build_occluders, classify_rows, classify_rows_numpy  # noqa: E402

@@ -18,7 +18,7 @@ import radiosity
 from radiosity.formfactors import polygon_to_polygon
 from radiosity.imprint import subdivide_imprinted
 from radiosity.patches import _newell, subdivide_faces
-from radiosity.formfactors._quadrature import triangulate
+from radiosity.geometry import triangulate
 
 from helpers import write_obj
 

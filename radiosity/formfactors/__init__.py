@@ -2,7 +2,8 @@
 
 The face of the form-factor stage. Private modules:
 
-- ``_closed_form``: point-to-polygon factors (Lambert's contour sum) and ``polygon_to_polygon``.
+- ``_closed_form``: point-to-polygon factors (Lambert's contour sum), with its numpy reference.
+- ``_polygon_pairs``: ``polygon_to_polygon``, the receiver cut into pieces integrated adaptively.
 - ``_quadrature``: quadrature points on patches and the adaptive per-pair integration
   (``pair_factors``) that the uniform matrix method fills its matrix with.
 - ``_lambert``: the numba kernels of the contour sum (points x polygons, indexed pairs,
@@ -11,10 +12,9 @@ The face of the form-factor stage. Private modules:
 See ``docs/formfactors.md``.
 """
 
-from ._closed_form import (lambert_indexed, lambert_pairs, point_to_polygon, point_to_polygons,
-                           polygon_normals, polygon_to_polygon)
-from ._quadrature import (centroids_and_areas, gauss_legendre_01, pair_factors, patch_points, rect_points,
-                          split_patch_points, triangulate)
+from ._closed_form import lambert_indexed, lambert_pairs, point_to_polygon, point_to_polygons
+from ._polygon_pairs import polygon_to_polygon
+from ._quadrature import gauss_legendre_01, pair_factors, patch_points, rect_points, split_patch_points
 
 __all__ = [
     "point_to_polygon",
@@ -27,7 +27,4 @@ __all__ = [
     "split_patch_points",
     "rect_points",
     "gauss_legendre_01",
-    "centroids_and_areas",
-    "triangulate",
-    "polygon_normals",
 ]

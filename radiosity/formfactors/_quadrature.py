@@ -13,7 +13,11 @@ from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["patch_points", "integrate_over_polygon", "triangulate"]
+from ..geometry import centroids_and_areas, polygon_normals, triangulate
+from ._closed_form import _MODES, _clip_to_upper, lambert_pairs
+from ._lambert import HAVE_NUMBA, _quadrature_kernel, _quadrature_source_kernel
+
+__all__ = ["patch_points", "integrate_over_polygon"]
 
 
 @lru_cache(maxsize=None)
@@ -43,47 +47,6 @@ def patch_points(quads: np.ndarray, order: int) -> tuple[np.ndarray, np.ndarray]
         centroid, area = centroids_and_areas(quads)
         return centroid[:, None, :], area[:, None]
     return split_patch_points(quads, order, 1)
-
-
-def centroids_and_areas(quads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Area centroids and areas of patches stored as (n, 4, 3) (triangles repeat a vertex)."""
-    a, b, c, d = (quads[:, i] for i in range(4))
-    cross1 = np.cross(b - a, c - a)
-    cross2 = np.cross(c - a, d - a)
-    area1 = 0.5 * np.linalg.norm(cross1, axis=1)
-    area2 = 0.5 * np.linalg.norm(cross2, axis=1)
-    area = area1 + area2
-    safe = np.where(area > 0, area, 1.0)
-    centroid = ((a + b + c) * area1[:, None] + (a + c + d) * area2[:, None]) / (3 * safe[:, None])
-    centroid = np.where(area[:, None] > 0, centroid, quads.mean(axis=1))
-    return centroid, area
-
-
-def triangulate(polygon: np.ndarray) -> np.ndarray:
-    """Triangles (t, 3, 3) of a planar simple polygon (k, 3), convex or not (earcut).
-
-    Every triangle is wound like the polygon (counter-clockwise around its Newell normal), so
-    the pieces face the way the face does. Earcut works on the polygon projected onto the
-    coordinate plane its normal is most aligned with, and that projection mirrors polygons
-    facing -x, +y or -z; the winding is therefore restored per triangle, by the sign of its
-    normal along the polygon's.
-    """
-    import mapbox_earcut
-
-    if len(polygon) == 3:
-        return polygon[None].copy()
-    centred = polygon - polygon.mean(axis=0)
-    normal = np.cross(centred, np.roll(centred, -1, axis=0)).sum(axis=0)
-    axis = int(np.argmax(np.abs(normal)))
-    plane = np.delete(centred, axis, axis=1)
-    rings = np.array([len(polygon)], dtype=np.uint32)
-    index = np.asarray(mapbox_earcut.triangulate_float64(plane, rings), dtype=np.int64).reshape(-1, 3)
-    if len(index) == 0:
-        return np.zeros((0, 3, 3))
-    a, b, c = (centred[index[:, k]] for k in range(3))
-    backwards = np.cross(b - a, c - a) @ normal < 0
-    index[backwards] = index[backwards][:, ::-1]
-    return polygon[index]
 
 
 def split_triangles(tris: np.ndarray) -> np.ndarray:
@@ -421,8 +384,6 @@ def _weighted_means(pts, nrm, w, slot, sources, j, mode):
     ``pts`` (u, nq, 3) and ``w`` (u, nq) are the points and weights of u receiver pieces,
     ``nrm`` (u, 3) their normals; ``slot`` and ``j`` (t,) pick a piece and a source per pair.
     """
-    from ._closed_form import HAVE_NUMBA, _MODES, _quadrature_kernel, _quadrature_source_kernel, lambert_pairs
-
     out = np.empty(len(slot))
     nq = pts.shape[1]
     flat = np.ascontiguousarray(pts.reshape(-1, 3))
@@ -951,8 +912,6 @@ def _clipped_receivers(quads, normals, srcs, i, j, height, *, rtol, max_points, 
     fanned into triangles, and each triangle is integrated as a receiver of its own; the
     results are combined by area.
     """
-    from ._closed_form import _clip_to_upper
-
     slots = _clip_to_upper(quads[i], height)  # (m, 8, 3), removed slots repeat a kept vertex
     k = slots.shape[1]
     a = np.repeat(slots[:, :1], k - 2, axis=1)
@@ -976,8 +935,6 @@ def _clipped_receivers(quads, normals, srcs, i, j, height, *, rtol, max_points, 
 
 
 def _src_normals(polys: np.ndarray) -> np.ndarray:
-    from ._closed_form import polygon_normals
-
     return polygon_normals(polys)
 
 

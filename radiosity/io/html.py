@@ -112,7 +112,7 @@ def write_html(solution, path: str | Path, *, exposure: float | None = None) -> 
 
 def write_page(data: dict, path: str | Path) -> None:
     """Write the page around ``data`` (from :func:`page_data` or :func:`page_data_from_result`)."""
-    from .export import atomic_path
+    from ._files import atomic_path
 
     text = (_PAGE.replace("__TITLE__", html.escape(f"radiosity: {data['source']}"))
             .replace("__DATA__", json.dumps(data).replace("</", "<\\/")))

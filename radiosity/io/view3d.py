@@ -474,7 +474,7 @@ def write_vs3(scene, path, *, title: str = "exported by radiosity") -> None:
     Surface names are ``object:k``; View3D requires radiating surfaces before obstructions, so
     patches are reordered that way (the order is ``S`` patches in scene order, then ``O``).
     """
-    from .export import atomic_path
+    from ._files import atomic_path
 
     quads = scene.patch_quads
     is_tri = (quads[:, 3] == quads[:, 2]).all(axis=1)

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from ..formfactors._quadrature import centroids_and_areas
+from ..geometry import centroids_and_areas
 from ._constants import BVH_LEAF, CHUNK_TRIPLES, MAX_OCCLUDER_VERTICES, MERGE_AREA_REL, PLANE_REL
 
 __all__ = ["Occluders", "build_occluders", "FREE", "FULL", "MAYBE"]

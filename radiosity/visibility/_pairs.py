@@ -29,7 +29,7 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from .. import _tol
-from ..formfactors._quadrature import patch_points
+from ..formfactors import patch_points
 from . import _occluders
 from ._constants import (CHUNK_CELL_PAIRS, CHUNK_CLASSIFY, CHUNK_SHADOWS, MAX_UNION, MAX_UNION_CELLS,
                          PLANE_REL, RAY_TFAR_SHORT, WEIGHT_FLOOR_REL)

@@ -15,17 +15,14 @@ import numpy as np
 import scipy.sparse as sp
 
 from ... import _tol
-from ...formfactors._closed_form import lambert_pairs
-from ...formfactors._quadrature import pair_factors, patch_points
+from ..._memory import FILL_PAIRS
+from ...formfactors import lambert_pairs, pair_factors, patch_points
 
 __all__ = ["FillSettings", "FillStats", "candidate_pairs", "unoccluded_factors", "fill_block", "assemble"]
 
 
 VISIBILITY_MODES = ("auto", "rays", "exact")
 
-# Directed pairs per block of the fill (a block's pairs (i, j > i) and their mirrors): bounds the
-# per-pair temporaries of form factors and visibility (a few hundred bytes each).
-FILL_PAIRS = 2_000_000
 
 
 @dataclass(frozen=True)
