@@ -36,8 +36,8 @@ REFERENCE = 0.0995062946
 # (far_separation = inf): the plate-to-plate total is then a Gauss rule of a function that is
 # smooth on every patch (its kinks sit at x = 0.5, y = 0.5, on patch edges for even n).
 MODES = {
-    "exact": FillSettings(near_order=2, far_separation=float("inf"), visibility="exact"),
-    "rays": FillSettings(near_order=2, far_separation=float("inf"), visibility="rays", visibility_samples=2,
+    "exact": FillSettings(formfactor_rtol=1e-6, near_order=2, far_separation=float("inf"), visibility="exact"),
+    "rays": FillSettings(formfactor_rtol=1e-6, near_order=2, far_separation=float("inf"), visibility="rays", visibility_samples=2,
                          visibility_max_samples=4),
 }
 

@@ -24,7 +24,7 @@ __all__ = ["Scene", "load_scene", "bundled_scene"]
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 EMISSION_MODES = ("radiance", "exitance")
-LOAD_OPTIONS = ("units", "allow_clamp", "two_sided", "imprint")
+LOAD_OPTIONS = ("units", "allow_clamp", "imprint")
 
 
 @dataclass(frozen=True, eq=False)
@@ -218,6 +218,9 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
     >>> scene.objects[:3]
     ['floor', 'ceiling', 'back_wall']
     """
+    if "two_sided" in options:  # was accepted and ignored: refuse it rather than pretend
+        raise TypeError("load_scene option 'two_sided' is not supported: surfaces are one-sided; model a "
+                        "two-sided sheet as two faces back to back (opposite windings)")
     reject_unknown(options, LOAD_OPTIONS, "load_scene option")
     if Path(path).suffix.lower() == ".vs3":
         return load_vs3(path, max_patch_size=max_patch_size)

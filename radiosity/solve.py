@@ -35,10 +35,7 @@ class Prepared:
 
 
 def _fill_settings(options: Options) -> FillSettings:
-    return FillSettings(near_order=options.near_order, far_separation=options.far_separation,
-                        visibility_samples=options.visibility_samples, visibility=options.visibility,
-                        visibility_max_samples=options.visibility_max_samples,
-                        visibility_rtol=options.visibility_rtol, formfactor_rtol=options.formfactor_rtol)
+    return FillSettings.from_options(options)
 
 
 def _cut(scene: Scene, options: Options) -> Scene:

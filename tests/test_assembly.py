@@ -46,8 +46,8 @@ def plate_total(F, area, n):
     return float((area[:m, None] * F[:m, m:2 * m]).sum())
 
 
-EXACT = FillSettings(near_order=6, far_separation=1e9, visibility="exact")
-RAYS = FillSettings(near_order=3, far_separation=1e9, visibility="rays", visibility_samples=3,
+EXACT = FillSettings(formfactor_rtol=1e-6, near_order=6, far_separation=1e9, visibility="exact")
+RAYS = FillSettings(formfactor_rtol=1e-6, near_order=3, far_separation=1e9, visibility="rays", visibility_samples=3,
                     visibility_max_samples=6)
 
 
@@ -74,7 +74,7 @@ def test_full_blocking_needs_no_rays_and_no_clipping():
 def test_shadow_edge_crossing_patches():
     """n = 3: the half blocker's shadow edge runs through the middle row of patches."""
     blocker = grid(1, 0.5, down=False, x0=-1, x1=2, y0=-1, y1=0.5)
-    settings = FillSettings(near_order=5, far_separation=1e9, visibility="exact")
+    settings = FillSettings(formfactor_rtol=1e-6, near_order=5, far_separation=1e9, visibility="exact")
     F, area, stats = fill([grid(3, 0, down=False), grid(3, 1, down=True), blocker], settings)
     assert stats.n_exact_pairs > 0
     assert plate_total(F, area, 3) == pytest.approx(HALF_BLOCKED, rel=1e-6)
@@ -88,7 +88,7 @@ def test_blocked_plates_rays_and_auto():
     F, area, stats = fill(parts, RAYS)
     assert stats.n_rays > 0 and stats.n_exact_pairs == 0
     assert plate_total(F, area, 4) == pytest.approx(BLOCKED_PARALLEL_SQUARES, rel=1e-2)
-    auto = FillSettings(near_order=4, far_separation=1e9, visibility="auto", visibility_rtol=1e-9)
+    auto = FillSettings(formfactor_rtol=1e-6, near_order=4, far_separation=1e9, visibility="auto", visibility_rtol=1e-9)
     F, area, stats = fill(parts, auto)
     assert stats.n_exact_pairs == stats.n_traced_pairs > 0
     assert plate_total(F, area, 4) == pytest.approx(BLOCKED_PARALLEL_SQUARES, rel=1e-6)
@@ -122,14 +122,14 @@ def u_channel():
 def test_self_occlusion_in_a_non_convex_object_reciprocity_and_rays_vs_exact():
     parts = u_channel()
     groups = np.zeros(sum(len(p) for p in parts), int)
-    exact = FillSettings(near_order=4, far_separation=1e9, visibility="exact")
+    exact = FillSettings(formfactor_rtol=1e-6, near_order=4, far_separation=1e9, visibility="exact")
     F, area, stats = fill(parts, exact, groups=groups)
     assert stats.n_traced_pairs > 0
     AF = area[:, None] * F
     AF = AF[:32, :32]  # floor and ceiling (the fin touches the floor: an unoccluded-quadrature matter)
     np.testing.assert_allclose(AF, AF.T, atol=3e-2 * AF.max())  # per pair: Gauss over shadow kinks
     assert AF[:16, 16:32].sum() == pytest.approx(AF[16:32, :16].sum(), rel=1e-3)
-    rays = FillSettings(near_order=4, far_separation=1e9, visibility="rays", visibility_samples=4,
+    rays = FillSettings(formfactor_rtol=1e-6, near_order=4, far_separation=1e9, visibility="rays", visibility_samples=4,
                         visibility_max_samples=8)
     Fr, _, _ = fill(parts, rays, groups=groups)
     floor_to_ceiling = slice(0, 16), slice(16, 32)
@@ -161,7 +161,7 @@ def closed_cube(n):
 @pytest.mark.parametrize("cull", [True, False])
 def test_closed_cube_stays_closed_with_rays(cull):
     """Every patch blocks; with culling off every pair is traced: no ray may self-shadow."""
-    settings = FillSettings(near_order=4, visibility="rays")
+    settings = FillSettings(formfactor_rtol=1e-6, near_order=4, visibility="rays")
     F, area, stats = fill(closed_cube(3), settings, cull=cull)
     np.testing.assert_allclose(F.sum(axis=1), 1.0, atol=2e-3)
     if not cull:
@@ -190,7 +190,7 @@ def test_fill_classifies_each_pair_once_for_both_directions(mode, monkeypatch):
     monkeypatch.setattr(constants, "MAX_CELL_OCCLUDERS", 10**9)  # every exact pair over cells here
 
     quads, groups = boxes_scene()
-    settings = FillSettings(near_order=3, far_separation=1e9, visibility=mode, visibility_samples=2,
+    settings = FillSettings(formfactor_rtol=1e-6, near_order=3, far_separation=1e9, visibility=mode, visibility_samples=2,
                             visibility_max_samples=4, visibility_rtol=1e-6)  # exact: the cells
     normals = polygon_normals(quads)
     centroid, area = centroids_and_areas(quads)
@@ -227,7 +227,7 @@ def test_inactive_patches_are_left_out_and_nothing_else_changes():
     quads, groups = boxes_scene()
     normals = polygon_normals(quads)
     centroid, area = centroids_and_areas(quads)
-    settings = FillSettings(visibility="auto")
+    settings = FillSettings(formfactor_rtol=1e-6, visibility="auto")
     active = np.ones(len(quads), bool)
     active[[3, 40, 70, 81]] = False  # floor, ceiling and box patches
 
@@ -286,3 +286,17 @@ def test_pairs_behind_many_occluders_keep_the_fixed_points(monkeypatch):
 
     monkeypatch.setattr(constants, "MAX_CELL_OCCLUDERS", 0)  # no pair qualifies for the cells
     np.testing.assert_array_equal(fill(tight), fill(loose))
+
+
+def test_fill_settings_are_options_fields_with_options_defaults():
+    """One Options, one set of defaults: the fill reads Options' fields, never its own copies."""
+    from dataclasses import fields
+
+    from radiosity.options import PRESETS, Options
+
+    defaults = Options()
+    for f in fields(FillSettings):
+        assert getattr(FillSettings(), f.name) == getattr(defaults, f.name), f.name
+    for preset in PRESETS.values():
+        settings = FillSettings.from_options(preset)
+        assert all(getattr(settings, f.name) == getattr(preset, f.name) for f in fields(FillSettings))

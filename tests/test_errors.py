@@ -129,6 +129,11 @@ def test_unknown_units_and_options():
         radiosity.load_scene(DATA / "room.obj", unit="mm")
 
 
+def test_two_sided_is_refused_not_ignored():
+    with pytest.raises(TypeError, match="'two_sided' is not supported: surfaces are one-sided"):
+        radiosity.load_scene(DATA / "room.obj", two_sided=True)
+
+
 # --- memory ------------------------------------------------------------------------------
 
 def test_budget_from_environment(monkeypatch):

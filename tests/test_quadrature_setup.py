@@ -3,11 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from radiosity.formfactors import _quadrature as Q
 
-pytestmark = pytest.mark.skipif(not Q._HAVE_NUMBA, reason="the loops are the numpy references without numba")
 
 
 def grid_patches(rng, n):

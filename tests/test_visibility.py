@@ -244,6 +244,10 @@ def test_exact_fraction_falls_back_to_shapely_unions(monkeypatch):
     compiled = make_vis(quads, groups).fraction(i, j, exact=True, order=3)
     monkeypatch.setattr(visibility, "MAX_UNION", 1)
     monkeypatch.setattr(visibility._exact, "MAX_UNION", 1)  # else the group kernel unites them itself
+    united = []  # rows that reached the shapely union: the path this test is named for
+    real = visibility._exact.union_factors
+    monkeypatch.setattr(visibility._exact, "union_factors", lambda x, *a, **k: united.append(len(x)) or real(x, *a, **k))
     fallback = make_vis(quads, groups).fraction(i, j, exact=True, order=3)
+    assert sum(united) > 100
     assert 0 < compiled.mean() < 1
     np.testing.assert_allclose(fallback, compiled, rtol=1e-9, atol=1e-12)

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import _memory, _tol
-from ._lambert import (HAVE_NUMBA, _lambert_indexed_kernel, _lambert_matrix_kernel,  # noqa: F401
+from ._lambert import (_lambert_indexed_kernel, _lambert_matrix_kernel,  # noqa: F401
                        _lambert_rows_kernel, _quadrature_kernel, _quadrature_source_kernel)
 from .._validate import as_points, as_polygon, as_unit_vectors
 from ..geometry import polygon_normals
@@ -100,9 +100,6 @@ def point_to_polygons(points, normals, polygons) -> np.ndarray:
     points, polys = _power_of_two_scaled(points, polys)
     m, n = len(points), len(polys)
     _memory.check(f"the {m:,} x {n:,} form-factor matrix", 8 * m * n, "pass fewer receivers or polygons per call")
-    if not HAVE_NUMBA:  # pragma: no cover
-        return lambert_pairs(np.repeat(points, n, axis=0), np.repeat(normals, n, axis=0),
-                             np.tile(polys, (m, 1, 1))).reshape(m, n)
     out = np.empty((n, m))
     if m and n:
         _lambert_matrix_kernel(points, normals, polys, _MODES["auto"], out)
@@ -157,7 +154,7 @@ def lambert_pairs(points: np.ndarray, normals: np.ndarray, polys: np.ndarray, *,
     (m,) float
     """
     if backend == "auto":
-        backend = "numba" if HAVE_NUMBA else "numpy"
+        backend = "numba"
     if backend == "numba":
         points, normals, polys = (np.ascontiguousarray(a, dtype=float) for a in (points, normals, polys))
         out = np.empty(len(points))
@@ -199,8 +196,6 @@ def lambert_indexed(points: np.ndarray, normals: np.ndarray, polys: np.ndarray, 
     out = np.empty(len(pi))
     if not len(pi):
         return out
-    if not HAVE_NUMBA:  # pragma: no cover
-        return _lambert_numpy(points[pi], normals[pi], polys[qi])
     _lambert_indexed_kernel(points, normals, polys, pi, qi, _MODES[mode], out)
     return out
 

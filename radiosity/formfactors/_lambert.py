@@ -15,6 +15,7 @@ Lanes the vectorised paths cannot finish (the source straddles the receiver's pl
 
 from __future__ import annotations
 
+import numba as _numba
 import numpy as np
 
 from .. import _tol
@@ -26,19 +27,8 @@ _TWO_PI = 2.0 * np.pi
 # loop over blocks of pairs in parallel (``prange``) and give each block its own scratch space.
 # ---------------------------------------------------------------------------------------------
 
-try:  # numba is a dependency; formfactors' numpy path stays as the reference and as a fallback.
-    import numba as _numba
-
-    HAVE_NUMBA = True
-except ImportError:  # pragma: no cover - exercised only without numba
-    _numba = None
-    HAVE_NUMBA = False
-
-
 def _jit(**kwargs):
-    if HAVE_NUMBA:
-        return _numba.njit(cache=True, fastmath=False, error_model="numpy", **kwargs)
-    return lambda f: f  # pragma: no cover
+    return _numba.njit(cache=True, fastmath=False, error_model="numpy", **kwargs)
 
 
 _DEG = _tol.DEGENERATE_REL
@@ -415,10 +405,7 @@ def _fmin(a, b):
     return a if a < b else b
 
 
-if HAVE_NUMBA:
-    _prange = _numba.prange
-else:  # pragma: no cover
-    _prange = range
+_prange = _numba.prange
 
 
 # ---------------------------------------------------------------------------------------------
@@ -452,9 +439,7 @@ _ROW_W = 17  # w_i = v_i - o (3 rows per vertex, w_0 = 0), then per vertex |a_i|
 
 def _vjit(**kwargs):
     """The block kernels may contract a*b+c into FMAs (one rounding fewer; ~10% faster)."""
-    if HAVE_NUMBA:
-        return _numba.njit(cache=True, fastmath={"contract"}, error_model="numpy", **kwargs)
-    return lambda f: f  # pragma: no cover
+    return _numba.njit(cache=True, fastmath={"contract"}, error_model="numpy", **kwargs)
 
 
 @_vjit()

@@ -11,11 +11,12 @@ from __future__ import annotations
 from collections.abc import Callable
 from functools import lru_cache
 
+import numba as _numba
 import numpy as np
 
 from ..geometry import centroids_and_areas, polygon_normals, triangulate
-from ._closed_form import _MODES, _clip_to_upper, lambert_pairs
-from ._lambert import HAVE_NUMBA, _quadrature_kernel, _quadrature_source_kernel
+from ._closed_form import _MODES, _clip_to_upper
+from ._lambert import _quadrature_kernel, _quadrature_source_kernel
 
 __all__ = ["patch_points", "integrate_over_polygon"]
 
@@ -182,18 +183,17 @@ def rect_points(quads: np.ndarray, rects: np.ndarray, order: int, frames: np.nda
         Weights sum to the area of each rectangle's image.
     """
     nodes, w = gauss_legendre_01(order)
-    if _HAVE_NUMBA:  # one pass, no temporaries: numpy's ~25 passes cost as much as the kernel
-        n = len(rects)
-        points, weights = np.empty((n, order * order, 3)), np.empty((n, order * order))
-        _rect_points_loop(np.ascontiguousarray(quads, dtype=float), np.ascontiguousarray(rects, dtype=float),
-                          np.zeros((0, 4, 2)) if frames is None else np.ascontiguousarray(frames, dtype=float),
-                          nodes, w, points, weights)
-        return points, weights
-    return _rect_points_numpy(quads, rects, nodes, w, frames)  # pragma: no cover
+    # one pass, no temporaries: numpy's ~25 passes (_rect_points_numpy) cost as much as the kernel
+    n = len(rects)
+    points, weights = np.empty((n, order * order, 3)), np.empty((n, order * order))
+    _rect_points_loop(np.ascontiguousarray(quads, dtype=float), np.ascontiguousarray(rects, dtype=float),
+                      np.zeros((0, 4, 2)) if frames is None else np.ascontiguousarray(frames, dtype=float),
+                      nodes, w, points, weights)
+    return points, weights
 
 
 def _rect_points_numpy(quads, rects, nodes, w, frames=None):
-    """:func:`rect_points` in numpy (the reference for the loop, and the fallback)."""
+    """:func:`rect_points` in numpy (the reference for the loop)."""
     order = len(nodes)
     u = rects[:, 0:1] + rects[:, 2:3] * np.repeat(nodes, order)[None, :]
     v = rects[:, 1:2] + rects[:, 3:4] * np.tile(nodes, order)[None, :]
@@ -205,16 +205,7 @@ def _rect_points_numpy(quads, rects, nodes, w, frames=None):
     return points, jac * scale
 
 
-try:  # numba comes with formfactors' kernels; without it rect_points falls back to numpy
-    import numba as _numba
-
-    _HAVE_NUMBA = True
-except ImportError:  # pragma: no cover
-    _numba = None
-    _HAVE_NUMBA = False
-
-
-_prange = _numba.prange if _HAVE_NUMBA else range
+_prange = _numba.prange
 
 
 def _rect_points_loop(quads, rects, frames, nodes, w, points, weights):
@@ -251,8 +242,7 @@ def _rect_points_loop(quads, rects, frames, nodes, w, points, weights):
                 weights[r, k] = wt * np.sqrt(jac2)
 
 
-if _HAVE_NUMBA:
-    _rect_points_loop = _numba.njit(cache=True, fastmath=False)(_rect_points_loop)
+_rect_points_loop = _numba.njit(cache=True, fastmath=False)(_rect_points_loop)
 
 
 def _inverse_map(quads: np.ndarray, points: np.ndarray, steps: int = 8) -> tuple[np.ndarray, np.ndarray]:
@@ -305,8 +295,7 @@ def _pair_setup(quads, normals, centroid, r_rec, s_cen, s_nrm, r_src, i, j, rtol
     m = len(i)
     crossing, order = np.empty(m, dtype=bool), np.empty(m, dtype=np.int64)
     orders = np.array(_APRIORI_ORDERS, dtype=np.int64)
-    setup = _pair_setup_loop if _HAVE_NUMBA else _pair_setup_numpy
-    setup(quads, normals, centroid, r_rec, s_cen, s_nrm, r_src, i, j, orders, rtol / _APRIORI_SAFETY,
+    _pair_setup_loop(quads, normals, centroid, r_rec, s_cen, s_nrm, r_src, i, j, orders, rtol / _APRIORI_SAFETY,
           crossing, order)
     return crossing, order
 
@@ -361,8 +350,7 @@ def _receiver_heights(quads, s_cen, s_nrm, i, j):
     return np.einsum("mkc,mc->mk", quads[i] - s_cen[j][:, None, :], s_nrm[j])
 
 
-if _HAVE_NUMBA:
-    _pair_setup_loop = _numba.njit(cache=True, parallel=True, error_model="numpy")(_pair_setup_loop)
+_pair_setup_loop = _numba.njit(cache=True, parallel=True, error_model="numpy")(_pair_setup_loop)
 
 
 def _evaluate(rquads, rnormals, sources, i, j, order, splits, mode):
@@ -388,7 +376,7 @@ def _weighted_means(pts, nrm, w, slot, sources, j, mode):
     nq = pts.shape[1]
     flat = np.ascontiguousarray(pts.reshape(-1, 3))
     normals = np.ascontiguousarray(np.repeat(nrm, nq, axis=0))
-    if HAVE_NUMBA and sources.shape[1] <= 4:
+    if sources.shape[1] <= 4:
         # grouped by source, so that each source meets its receivers' points in SIMD lanes together
         order = np.argsort(j, kind="stable")
         sorted_out = np.empty(len(slot))
@@ -397,14 +385,10 @@ def _weighted_means(pts, nrm, w, slot, sources, j, mode):
                                   np.ascontiguousarray(j[order], dtype=np.int64), _MODES[mode], sorted_out)
         out[order] = sorted_out
         return out
-    if HAVE_NUMBA:
-        _quadrature_kernel(flat, normals, np.ascontiguousarray(w.reshape(-1)), nq, slot.astype(np.int64),
-                           np.ascontiguousarray(sources), np.ascontiguousarray(j, dtype=np.int64),
-                           _MODES[mode], out)
-        return out
-    rows = (slot[:, None] * nq + np.arange(nq)).ravel()  # pragma: no cover
-    vals = lambert_pairs(flat[rows], normals[rows], np.repeat(sources[j], nq, axis=0))  # pragma: no cover
-    return (vals.reshape(-1, nq) * w[slot]).sum(axis=1) / w[slot].sum(axis=1)  # pragma: no cover
+    _quadrature_kernel(flat, normals, np.ascontiguousarray(w.reshape(-1)), nq, slot.astype(np.int64),
+                       np.ascontiguousarray(sources), np.ascontiguousarray(j, dtype=np.int64),
+                       _MODES[mode], out)
+    return out
 
 
 # --- Adaptive refinement of near pairs ----------------------------------------------------------
@@ -535,13 +519,12 @@ def _near_flags(quads, sources, i, j, height, size):
     """
     m = len(i)
     lifted, touching, collapsed = np.empty(m, dtype=bool), np.empty(m, dtype=bool), np.empty(m, dtype=bool)
-    flags = _near_flags_loop if _HAVE_NUMBA else _near_flags_numpy
-    flags(quads, sources, i, j, height, size, lifted, touching, collapsed)
+    _near_flags_loop(quads, sources, i, j, height, size, lifted, touching, collapsed)
     return lifted, touching, collapsed
 
 
 def _near_flags_numpy(quads, sources, i, j, height, size, lifted, touching, collapsed):
-    """:func:`_near_flags` in numpy (the reference for the loop, and the fallback)."""
+    """:func:`_near_flags` in numpy (the reference for the loop)."""
     lifted[:] = ((height > 0) & (height < 2 * size[:, None] / _ADAPT_LAYER)).any(axis=1)
     centre = quads[i].mean(axis=1)
     radius = np.linalg.norm(quads[i] - centre[:, None, :], axis=2).max(axis=1)
@@ -580,9 +563,8 @@ def _distance(x, y):
     return np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
 
 
-if _HAVE_NUMBA:
-    _distance = _numba.njit(cache=True, inline="always")(_distance)
-    _near_flags_loop = _numba.njit(cache=True, parallel=True, error_model="numpy")(_near_flags_loop)
+_distance = _numba.njit(cache=True, inline="always")(_distance)
+_near_flags_loop = _numba.njit(cache=True, parallel=True, error_model="numpy")(_near_flags_loop)
 
 
 def _singular_points(quads, sources, height, size):

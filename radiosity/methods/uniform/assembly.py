@@ -9,13 +9,15 @@ never evaluated; pairs that nothing can block get no rays.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
+import numba as _numba
 import numpy as np
 import scipy.sparse as sp
 
 from ... import _tol
 from ..._memory import FILL_PAIRS
+from ...options import Options
 from ...formfactors import lambert_pairs, pair_factors, patch_points
 
 __all__ = ["FillSettings", "FillStats", "candidate_pairs", "unoccluded_factors", "fill_block", "assemble"]
@@ -23,43 +25,29 @@ __all__ = ["FillSettings", "FillStats", "candidate_pairs", "unoccluded_factors",
 
 VISIBILITY_MODES = ("auto", "rays", "exact")
 
+_OPTIONS = Options()  # the defaults
 
 
 @dataclass(frozen=True)
 class FillSettings:
-    """Accuracy knobs of the fill (part of the cache key).
+    """The accuracy fields of :class:`radiosity.Options` that the fill reads (part of the cache key).
 
-    Attributes
-    ----------
-    near_order : int, default: 3
-        Gauss points per direction on the receiver for exact shadow clipping of near pairs.
-    far_separation : float, default: 3.0
-        Relative separation beyond which one centroid point is used.
-    visibility_samples : int, default: 2
-        Points per direction on each patch for the first round of shadow rays
-        (``visibility_samples**4`` rays per partly occluded pair).
-    visibility : {"auto", "rays", "exact"}, default: "auto"
-        How partly occluded pairs are computed: adaptive stratified rays, exact shadow clipping
-        at the receiver's quadrature points, or per pair by ``visibility_rtol``.
-    visibility_max_samples : int, default: 4
-        Points per direction on each patch for pairs whose first-round rays disagree.
-    visibility_rtol : float, default: 1e-4
-        ``"auto"`` computes a partly occluded pair exactly when rays would likely miss it by
-        more than this: when ``F_unoccluded / visibility_max_samples > visibility_rtol``. It is
-        an absolute error per view factor, i.e. relative to a closed enclosure's row sum of 1.
-    formfactor_rtol : float, default: 1e-6
-        Relative accuracy of each unoccluded factor (:func:`radiosity.formfactors._quadrature.pair_factors`
-        picks the rule per pair: a-priori Gauss orders for separated pairs, a verified
-        refinement ladder for near and touching ones).
+    One set of defaults: each field's default is ``Options``' (see its docstring for meanings);
+    ``solve`` builds these with :meth:`from_options`.
     """
 
-    near_order: int = 3
-    far_separation: float = 3.0
-    visibility_samples: int = 2
-    visibility: str = "auto"
-    visibility_max_samples: int = 4
-    visibility_rtol: float = 1e-4
-    formfactor_rtol: float = 1e-6
+    near_order: int = _OPTIONS.near_order
+    far_separation: float = _OPTIONS.far_separation
+    visibility_samples: int = _OPTIONS.visibility_samples
+    visibility: str = _OPTIONS.visibility
+    visibility_max_samples: int = _OPTIONS.visibility_max_samples
+    visibility_rtol: float = _OPTIONS.visibility_rtol
+    formfactor_rtol: float = _OPTIONS.formfactor_rtol
+
+    @classmethod
+    def from_options(cls, options: Options) -> "FillSettings":
+        """The fill's fields of ``options``."""
+        return cls(**{f.name: getattr(options, f.name) for f in fields(cls)})
 
     def __post_init__(self):
         if self.visibility not in VISIBILITY_MODES:
@@ -95,7 +83,7 @@ def candidate_pairs(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray
     offset = np.einsum("nc,nc->n", normals, centroid)
     scale = _circumradius(quads, centroid)
     ok = np.empty((len(rows), len(quads)), dtype=bool)
-    (_facing_loop if _HAVE_NUMBA else _facing_numpy)(quads, normals, offset, scale, rows, ok)
+    _facing_loop(quads, normals, offset, scale, rows, ok)
     r, j = np.nonzero(ok)
     return rows[r], j
 
@@ -131,15 +119,9 @@ def _some_vertex_in_front(quads, j, normals, offset, i, tol):
     return False
 
 
-try:  # numba comes with the kernels; without it the pairs come from numpy
-    import numba as _numba
-
-    _HAVE_NUMBA = True
-    _prange = _numba.prange
-    _some_vertex_in_front = _numba.njit(cache=True, inline="always")(_some_vertex_in_front)
-    _facing_loop = _numba.njit(cache=True, parallel=True, error_model="numpy")(_facing_loop)
-except ImportError:  # pragma: no cover
-    _HAVE_NUMBA = False
+_prange = _numba.prange
+_some_vertex_in_front = _numba.njit(cache=True, inline="always")(_some_vertex_in_front)
+_facing_loop = _numba.njit(cache=True, parallel=True, error_model="numpy")(_facing_loop)
 
 
 def _is_near(quads, centroid, i, j, settings: FillSettings) -> np.ndarray:
