@@ -248,6 +248,7 @@ def test_facing_pairs_loop_matches_numpy():
     from test_visibility import boxes_scene
 
     from radiosity.methods.uniform import assembly
+    from radiosity.methods.uniform._reference import _facing_numpy
 
     rng = np.random.default_rng(7)
     random_quads = rng.uniform(-1, 1, (60, 1, 3)) + 0.3 * rng.normal(size=(60, 4, 3))
@@ -260,7 +261,7 @@ def test_facing_pairs_loop_matches_numpy():
         rows = np.arange(0, len(quads), 2)
         got, ref = (np.empty((len(rows), len(quads)), dtype=bool) for _ in range(2))
         assembly._facing_loop(quads, normals, offset, scale, rows, got)
-        assembly._facing_numpy(quads, normals, offset, scale, rows, ref)
+        _facing_numpy(quads, normals, offset, scale, rows, ref)
         assert ref.any() and not ref.all()
         np.testing.assert_array_equal(got, ref)
 

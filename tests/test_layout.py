@@ -99,6 +99,11 @@ def test_nothing_in_the_pipeline_uses_the_alternatives(graph):
     assert not users
 
 
+def test_the_numpy_references_serve_the_tests_only(graph):
+    users = [a for a, targets in graph.items() for b in targets if b.endswith("._reference")]
+    assert not users, users
+
+
 def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
     """One import cycle of ``graph`` (a list of modules, first repeated last), or None."""
     state: dict[str, int] = {}  # 1: on the current path, 2: done

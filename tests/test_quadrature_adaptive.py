@@ -15,7 +15,8 @@ import pytest
 
 from radiosity import polygon_to_polygon
 from helpers import parallel_rectangles_mp as parallel, perpendicular_rectangles_mp as perpendicular
-from radiosity.formfactors._quadrature import _rect_points_numpy, gauss_legendre_01, pair_factors, rect_points
+from radiosity.formfactors._quadrature import gauss_legendre_01, pair_factors, rect_points
+from radiosity.formfactors._reference import _rect_points_numpy
 from radiosity.geometry import centroids_and_areas
 
 mp.mp.dps = 30

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from radiosity.formfactors import _quadrature as Q
+from radiosity.formfactors import _reference as R
 
 
 
@@ -32,7 +33,7 @@ def test_pair_setup_matches_numpy():
         got = [np.empty(len(i), dtype=bool), np.empty(len(i), dtype=np.int64)]
         ref = [np.empty(len(i), dtype=bool), np.empty(len(i), dtype=np.int64)]
         Q._pair_setup_loop(quads, normals, centroid, r, centroid, normals, r, i, j, orders, limit, *got)
-        Q._pair_setup_numpy(quads, normals, centroid, r, centroid, normals, r, i, j, orders, limit, *ref)
+        R._pair_setup_numpy(quads, normals, centroid, r, centroid, normals, r, i, j, orders, limit, *ref)
         assert got[0].any() and np.unique(got[1]).size > 2
         np.testing.assert_array_equal(got[0], ref[0])
         np.testing.assert_array_equal(got[1], ref[1])
@@ -55,7 +56,7 @@ def test_near_flags_match_numpy():
     got = [np.empty(len(i), dtype=bool) for _ in range(3)]
     ref = [np.empty(len(i), dtype=bool) for _ in range(3)]
     Q._near_flags_loop(quads, sources, i, j, height, size, *got)
-    Q._near_flags_numpy(quads, sources, i, j, height, size, *ref)
+    R._near_flags_numpy(quads, sources, i, j, height, size, *ref)
     for g, f in zip(got, ref):
         np.testing.assert_array_equal(g, f)
     assert all(g.any() for g in got)

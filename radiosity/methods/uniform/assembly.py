@@ -88,16 +88,6 @@ def candidate_pairs(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray
     return rows[r], j
 
 
-def _facing_numpy(quads, normals, offset, scale, rows, ok):
-    """ok[r, j]: a vertex of j lies more than 1e-9 (size_i + size_j) in front of rows[r]'s plane,
-    and one of rows[r] in front of j's (numpy: the reference, and the fallback)."""
-    h_ji = np.einsum("rc,nkc->rnk", normals[rows], quads) - offset[rows, None, None]
-    h_ij = np.einsum("nc,rkc->rnk", normals, quads[rows]) - offset[None, :, None]
-    tol = 1e-9 * (scale[rows, None] + scale[None, :])
-    ok[:] = (h_ji.max(axis=2) > tol) & (h_ij.max(axis=2) > tol)
-    ok[np.arange(len(rows)), rows] = False
-
-
 def _facing_loop(quads, normals, offset, scale, rows, ok):
     """:func:`_facing_numpy` as a compiled loop over (row, patch) pairs: the numpy form builds
     two (rows, n, 4) height arrays (0.4 GB and 1 s for the Cornell box's 1,742 patches); the
