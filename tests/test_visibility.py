@@ -195,7 +195,7 @@ def test_segment_rays_match_embree_and_the_numpy_reference():
     reference, ref_agree = vis._trace_numpy(xs, wx, vis.normals[ii], jj, 3, key)
     np.testing.assert_allclose(embree, reference, rtol=1e-12, atol=1e-15)
     np.testing.assert_array_equal(agree, ref_agree)
-    from radiosity.visibility import _occluder_lists
+    from radiosity.visibility._pairs import _occluder_lists
 
     seg, seg_agree = vis._trace(xs, wx, vis.normals[ii], jj, 3, key, _occluder_lists(local[rows], occ, len(ii)))
     assert 0 < np.mean(seg) < 1 and not agree.all()
@@ -204,7 +204,7 @@ def test_segment_rays_match_embree_and_the_numpy_reference():
 
 
 def stratified_points_reference(quads, samples, key, salt):
-    from radiosity.visibility import stratified_points
+    from radiosity.visibility._pairs import stratified_points
     from radiosity.visibility._ray_kernel import stratified_points as compiled
 
     pts, w = stratified_points(quads, samples, key, salt)
@@ -237,16 +237,17 @@ def test_union_by_inclusion_exclusion_matches_shapely(monkeypatch, max_union):
 
 
 def test_exact_fraction_falls_back_to_shapely_unions(monkeypatch):
-    import radiosity.visibility._pairs as visibility
+    import radiosity.visibility._exact as exact
+    import radiosity.visibility._pairs as pairs
 
     quads, groups = boxes_scene()
     i, j = all_pairs(len(quads))
     compiled = make_vis(quads, groups).fraction(i, j, exact=True, order=3)
-    monkeypatch.setattr(visibility, "MAX_UNION", 1)
-    monkeypatch.setattr(visibility._exact, "MAX_UNION", 1)  # else the group kernel unites them itself
+    monkeypatch.setattr(pairs, "MAX_UNION", 1)
+    monkeypatch.setattr(exact, "MAX_UNION", 1)  # else the group kernel unites them itself
     united = []  # rows that reached the shapely union: the path this test is named for
-    real = visibility._exact.union_factors
-    monkeypatch.setattr(visibility._exact, "union_factors", lambda x, *a, **k: united.append(len(x)) or real(x, *a, **k))
+    real = exact.union_factors
+    monkeypatch.setattr(exact, "union_factors", lambda x, *a, **k: united.append(len(x)) or real(x, *a, **k))
     fallback = make_vis(quads, groups).fraction(i, j, exact=True, order=3)
     assert sum(united) > 100
     assert 0 < compiled.mean() < 1
