@@ -15,8 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import _memory, _tol
-from ._lambert import (_lambert_indexed_kernel, _lambert_matrix_kernel,  # noqa: F401
-                       _lambert_rows_kernel, _quadrature_kernel, _quadrature_source_kernel)
+from ._lambert import _lambert_indexed_kernel, _lambert_matrix_kernel, _lambert_rows_kernel
 from .._validate import as_points, as_polygon, as_unit_vectors
 from ..geometry import polygon_normals
 

@@ -18,7 +18,7 @@ import scipy.sparse as sp
 from ... import _tol
 from ..._memory import FILL_PAIRS
 from ...options import Options
-from ...formfactors import lambert_pairs, pair_factors, patch_points
+from ...formfactors import pair_factors
 
 __all__ = ["FillSettings", "FillStats", "candidate_pairs", "unoccluded_factors", "fill_block", "assemble"]
 
