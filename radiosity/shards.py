@@ -232,6 +232,11 @@ class ShardedViewFactors:
             y += self.block(k).T @ x
         return y
 
+    @property
+    def T(self) -> "_Transposed":
+        """F.T, for ``F.T @ x`` (:meth:`rmatvec`)."""
+        return _Transposed(self)
+
     def row_sums(self) -> np.ndarray:
         """(n,) sum_j F_ij."""
         return self.matvec(np.ones(self.shape[1]))
@@ -297,3 +302,14 @@ class ShardedViewFactors:
                                      f"{residual:.2e} (asked {rtol:g}) in channel {c}")
             out[:, c] = b
         return out
+
+
+class _Transposed:
+    """``F.T`` of a :class:`ShardedViewFactors`: only ``@`` (one pass over the shards)."""
+
+    def __init__(self, F: ShardedViewFactors):
+        self.F = F
+        self.shape = F.shape[::-1]
+
+    def __matmul__(self, x):
+        return self.F.rmatvec(x)

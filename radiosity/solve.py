@@ -11,7 +11,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import _memory
-from ._errors import RadiosityWarning
+from ._errors import MemoryBudgetError, RadiosityWarning
 from .assembly import FillSettings, FillStats, assemble
 from .cache import FormFactorCache
 from .options import PRESETS, Options
@@ -143,7 +143,17 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     ['back_wall', 'ceiling']
     """
     options = Options.from_preset(preset, **overrides)
-    prepared = prepare(scene, options)
+    t0 = time.perf_counter()
+    cut = _cut(scene, options)
+    cut_seconds = time.perf_counter() - t0
+    try:
+        _memory.check_fill(cut.n_patches, patch_size=cut.max_patch_size)
+    except MemoryBudgetError as refusal:  # F does not fit: fill it into shards and iterate over them
+        from ._outofcore import solve_out_of_core
+
+        return solve_out_of_core(cut, options, refusal, {"patches": cut_seconds})
+    prepared = prepare(cut, options)  # cut already: prepare's own cut is a no-op
+    prepared.timings["patches"] += cut_seconds
     cut = prepared.scene
     F = _without(prepared.F, _inactive(cut))
     _memory.check_solve(F.shape[0], F.nnz, options.solver)
