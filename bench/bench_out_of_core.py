@@ -8,8 +8,8 @@ memory; the script also prints its own ``ru_maxrss``):
   the shard folder ``--shards`` by :func:`radiosity.shards.write_shards`, blocks planned from
   ``RADIOSITY_MEMORY_BUDGET`` (:func:`radiosity._memory.plan_fill_block`);
 - ``solve``: B of (I - rho F) B = E from those shards (:func:`radiosity._outofcore.solve_shards`,
-  the path ``radiosity solve`` takes when F does not fit the budget), with the light's
-  conservation checked (power emitted = power absorbed + power escaping).
+  the path ``radiosity solve`` takes when F does not fit the budget), and the energy balance
+  (emitted = absorbed + escaped, two more passes).
 
 Run::
 
@@ -81,21 +81,19 @@ def solve(shards: Path, rtol: float) -> dict:
 
     from radiosity._outofcore import solve_shards
     from radiosity.shards import load_view_factors
+    from radiosity.system import energy_balance
 
     F = load_view_factors(shards)
     patches = F.patches()
     t0 = time.perf_counter()
     B, info = solve_shards(F, patches["reflectance"], patches["emission"], rtol=rtol)
     t1 = time.perf_counter()
-    area, rho, e = patches["area"], patches["reflectance"], patches["emission"]
-    # Power balance: emitted = absorbed + escaping (an open box lets light out of its front).
-    row = F.row_sums()
-    emitted = (area[:, None] * e).sum(axis=0)
-    absorbed = (area[:, None] * (1 - rho) * (B - e) / np.where(rho > 0, rho, 1)).sum(axis=0)
-    escaping = (area[:, None] * (1 - row)[:, None] * B).sum(axis=0)
+    balance = energy_balance(F, patches["area"], patches["reflectance"], patches["emission"], B)
+    emitted = np.array(balance["emitted"])
+    closure = (np.array(balance["absorbed"]) + np.array(balance["escaped"])) / emitted
     return {"phase": "solve", "patches": F.shape[0], "nnz": F.nnz, "shards": F.n_blocks, "solve_s": t1 - t0,
-            "peak_mb": _peak_mb(), "finite": bool(np.isfinite(B).all()), **info,
-            "power_balance": ((absorbed + escaping) / emitted).tolist(), "mean_B": B.mean(axis=0).tolist()}
+            "peak_mb": _peak_mb(), "finite": bool(np.isfinite(B).all()), **info, "energy_W": balance,
+            "absorbed_plus_escaped_over_emitted": closure.tolist(), "mean_B": B.mean(axis=0).tolist()}
 
 
 def main() -> None:
