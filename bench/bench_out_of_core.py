@@ -76,6 +76,19 @@ def fill(size: float, preset: str, shards: Path) -> dict:
             "stats": {k: getattr(stats, k) for k in type(stats).__dataclass_fields__}}
 
 
+class _Logged:
+    """F with a line per pass over the shards (the 18k solve runs for many minutes)."""
+
+    def __init__(self, F, t0: float):
+        self.F, self.t0, self.shape, self.passes = F, t0, F.shape, 0
+
+    def __matmul__(self, x):
+        y = self.F @ x
+        self.passes += 1
+        print(f"  {time.perf_counter() - self.t0:7.0f} s: pass {self.passes}, peak {_peak_mb():.0f} MB", flush=True)
+        return y
+
+
 def solve(shards: Path, rtol: float) -> dict:
     import numpy as np
 
@@ -86,7 +99,7 @@ def solve(shards: Path, rtol: float) -> dict:
     F = load_view_factors(shards)
     patches = F.patches()
     t0 = time.perf_counter()
-    B, info = solve_shards(F, patches["reflectance"], patches["emission"], rtol=rtol)
+    B, info = solve_shards(_Logged(F, t0), patches["reflectance"], patches["emission"], rtol=rtol)
     t1 = time.perf_counter()
     balance = energy_balance(F, patches["area"], patches["reflectance"], patches["emission"], B)
     emitted = np.array(balance["emitted"])
