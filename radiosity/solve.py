@@ -134,6 +134,12 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     -------
     Solution
 
+    Notes
+    -----
+    When the view-factor matrix does not fit the memory budget (``RADIOSITY_MEMORY_BUDGET``), it
+    is filled out of core into temporary shards and the system is solved over them by gmres
+    (:mod:`radiosity._outofcore`); ``Solution.view_factor_storage`` says which path ran.
+
     Examples
     --------
     >>> import radiosity
