@@ -25,8 +25,12 @@ class Solution:
         The scene as solved (cut to the preset's patch size).
     radiosity : (n_patches, 3) float
         Radiosity B per patch and RGB channel, W/m^2.
-    F : scipy.sparse.csr_matrix
-        The view-factor matrix used, ``F[i, j] = F(i -> j)``.
+    F : scipy.sparse.csr_matrix or radiosity.shards.ShardedViewFactors
+        The view-factor matrix used, ``F[i, j] = F(i -> j)``: on disk in shards when it did not
+        fit the memory budget (``view_factor_storage["where"] == "out of core"``).
+    view_factor_storage : dict
+        Where F was held: ``{"where": "in memory"}``, or out of core with its shards, block size,
+        passes over them, in-memory estimate and budget.
     """
 
     scene: Scene
@@ -38,6 +42,7 @@ class Solution:
     solver: Any = None
     energy: dict[str, list[float]] = field(default_factory=dict)
     cache_hit: bool = False
+    view_factor_storage: dict[str, Any] = field(default_factory=lambda: {"where": "in memory"})
     _sensors: Any = field(default=None, init=False, repr=False)
 
     @property
@@ -136,6 +141,7 @@ class Solution:
             "timings_s": {k: round(v, 4) for k, v in self.timings.items()},
             "cache_hit": self.cache_hit,
             "nonzeros": int(self.F.nnz),
+            "view_factors": dict(self.view_factor_storage),
             "pairs": getattr(fill, "n_pairs", None),
             "traced_pairs": getattr(fill, "n_traced_pairs", None),
             "rays": getattr(fill, "n_rays", None),

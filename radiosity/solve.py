@@ -11,13 +11,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import _memory
-from ._errors import RadiosityWarning
+from ._errors import MemoryBudgetError, RadiosityWarning
 from .methods.uniform.assembly import FillSettings, FillStats, assemble
 from .methods.uniform.cache import FormFactorCache
 from .options import PRESETS, Options
 from .scene import Scene
 from .solution import Solution
-from .methods.uniform.system import energy_balance, solve_system
+from .methods.uniform.system import SolverReport, energy_balance, solve_system
 from .visibility import Visibility
 
 __all__ = ["solve", "view_factors", "compute_view_factors", "write_view_factors", "prepare"]
@@ -131,6 +131,12 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     -------
     Solution
 
+    Notes
+    -----
+    When the view-factor matrix does not fit the memory budget (``RADIOSITY_MEMORY_BUDGET``), it
+    is filled out of core into temporary shards and the system is solved over them by gmres
+    (:mod:`radiosity.methods.uniform.outofcore`); ``Solution.view_factor_storage`` says which path ran.
+
     Examples
     --------
     >>> import radiosity
@@ -140,7 +146,15 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     ['back_wall', 'ceiling']
     """
     options = Options.from_preset(preset, **overrides)
-    prepared = prepare(scene, options)
+    t0 = time.perf_counter()
+    cut = _cut(scene, options)
+    cut_seconds = time.perf_counter() - t0
+    try:
+        _memory.check_fill(cut.n_patches, patch_size=cut.max_patch_size)
+    except MemoryBudgetError as refusal:  # F does not fit: fill it into shards and iterate over them
+        return _solve_out_of_core(cut, options, refusal, {"patches": cut_seconds})
+    prepared = prepare(cut, options)  # cut already: prepare's own cut is a no-op
+    prepared.timings["patches"] += cut_seconds
     cut = prepared.scene
     F = _without(prepared.F, _inactive(cut))
     _memory.check_solve(F.shape[0], F.nnz, options.solver)
@@ -152,6 +166,56 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     balance = energy_balance(F, cut.patch_area, cut.reflectance, cut.emission, radiosity)
     return Solution(scene=cut, radiosity=radiosity, F=F, options=options, timings=timings,
                     fill=prepared.stats, solver=report, energy=balance, cache_hit=prepared.cache_hit)
+
+
+def _solve_out_of_core(cut, options, refusal: MemoryBudgetError, timings: dict[str, float]):
+    """The :class:`radiosity.Solution` of ``cut`` (already cut to size) with F in shards.
+
+    ``refusal`` is the in-memory fill's ``MemoryBudgetError``, raised when not even the
+    out-of-core fill fits the budget.
+    """
+    import shutil
+    import tempfile
+    import weakref
+    from pathlib import Path
+
+    from .methods.uniform.cluster import FillProblem, cluster_client
+    from .methods.uniform.outofcore import OUT_OF_CORE_SOLVERS, out_of_core_plan, solve_shards
+    from .methods.uniform.shards import write_shards
+    if options.solver not in OUT_OF_CORE_SOLVERS:
+        raise MemoryBudgetError(f"{refusal}; or solve out of core with --solver gmres or bicgstab "
+                                f"(the {options.solver} solver needs F in memory)")
+    pairs = out_of_core_plan(cut.n_patches, refusal)
+    budget, source = _memory.budget_bytes()
+    folder = Path(tempfile.mkdtemp(prefix="radiosity-F-"))
+    inactive = _inactive(cut)
+    problem = FillProblem.from_scene(cut, _fill_settings(options), ~inactive)
+    update, close = _progress_bar(options.progress, cut.n_patches, "form factors (out of core)")
+    try:
+        with cluster_client(options.workers, options.scheduler) as client:
+            F, stats = write_shards(problem, cut, folder / "F.shards", client=client, pairs_per_block=pairs,
+                                    progress=update)
+    except BaseException:
+        shutil.rmtree(folder, ignore_errors=True)
+        raise
+    finally:
+        close()
+    weakref.finalize(F, shutil.rmtree, folder, True)  # the shards live as long as the matrix
+    timings["form factors"] = stats.seconds_formfactors
+    timings["visibility"] = stats.seconds_visibility
+    t0 = time.perf_counter()
+    # The fill leaves out the pairs of inactive patches: their rows and columns are already zero.
+    radiosity, info = solve_shards(F, cut.reflectance, cut.emission, method=options.solver, rtol=options.rtol)
+    radiosity[inactive] = cut.emission[inactive]
+    timings["solve"] = time.perf_counter() - t0
+    report = SolverReport(f"{info['method']} over the shards", [info["iterations"]] * 3, info["residual"],
+                          [None] * 3)
+    balance = energy_balance(F, cut.patch_area, cut.reflectance, cut.emission, radiosity)
+    storage = {"where": "out of core", "shards": F.n_blocks, "pairs_per_block": pairs,
+               "passes": info["passes"], "estimate_in_memory": _memory.format_bytes(_memory.fill_bytes(cut.n_patches)),
+               "budget": f"{_memory.format_bytes(budget)} ({source})"}
+    return Solution(scene=cut, radiosity=radiosity, F=F, options=options, timings=timings, fill=stats,
+                    solver=report, energy=balance, view_factor_storage=storage)
 
 
 def _fill_key(geometry_hash: str, inactive: np.ndarray) -> str:

@@ -74,6 +74,11 @@ def format_summary(solution, load_seconds: float, compile_seconds: float = 0.0) 
     times = {"load": load_seconds, **s["timings_s"]}
     lines.append("time (s)   " + "   ".join(f"{k} {v:.2f}" for k, v in times.items())
                  + (f"   (and compiling kernels {compile_seconds:.1f}, first run only)" if compile_seconds >= 0.5 else ""))
+    storage = s.get("view_factors") or {}
+    if storage.get("where") == "out of core":  # F did not fit the budget: say how it was solved
+        lines.append(f"matrix     out of core: F needs up to {storage['estimate_in_memory']}, budget "
+                     f"{storage['budget']}; {storage['shards']} shards of {storage['pairs_per_block']:,} pairs, "
+                     f"{storage['passes']} passes over them")
     sol = s["solver"]
     fallback = sorted({f for f in sol.get("fallback", []) if f})
     lines.append(f"solver     {sol['method']}, iterations {sol['iterations']}, residual {max(sol['residual']):.1e}"

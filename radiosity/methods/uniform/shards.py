@@ -173,14 +173,25 @@ class ShardedViewFactors:
         """The rows [start, stop) of each shard."""
         return [(e["start"], e["stop"]) for e in self.index["shards"]]
 
-    def shard(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Shard k's factors as (i, j, v): the pairs whose smaller patch is in its rows, both ways."""
+    def _read(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Shard k's (i, j, v) as stored (int32 indices)."""
         entry = self.index["shards"][k]
         with np.load(self.path / entry["file"]) as data:
             i, j, v = data["i"], data["j"], data["v"]
         if len(v) != entry["nnz"]:
             raise ValueError(f"{self.path / entry['file']}: {len(v)} factors, the index says {entry['nnz']}")
+        return i, j, v
+
+    def shard(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Shard k's factors as (i, j, v): the pairs whose smaller patch is in its rows, both ways."""
+        i, j, v = self._read(k)
         return i.astype(np.int64), j.astype(np.int64), v
+
+    def _coo(self, k: int) -> sp.coo_matrix:
+        # Products straight from COO: building a CSR per shard and pass cost 6x the product itself
+        # (2M factors, 1.4 s against 0.22 s).
+        i, j, v = self._read(k)
+        return sp.coo_matrix((v, (i, j)), shape=self.shape)
 
     def block(self, k: int) -> sp.csr_matrix:
         """Shard k as an (n, n) sparse matrix (zero outside its pairs)."""
@@ -218,7 +229,7 @@ class ShardedViewFactors:
             raise ValueError(f"cannot multiply a {self.shape} matrix by an array of shape {x.shape}")
         y = np.zeros(x.shape)
         for k in range(self.n_blocks):
-            y += self.block(k) @ x
+            y += self._coo(k) @ x
         return y
 
     def __matmul__(self, x):
@@ -229,8 +240,13 @@ class ShardedViewFactors:
         x = np.asarray(x, dtype=np.float64)
         y = np.zeros(x.shape)
         for k in range(self.n_blocks):
-            y += self.block(k).T @ x
+            y += self._coo(k).T @ x
         return y
+
+    @property
+    def T(self) -> "_Transposed":
+        """F.T, for ``F.T @ x`` (:meth:`rmatvec`)."""
+        return _Transposed(self)
 
     def row_sums(self) -> np.ndarray:
         """(n,) sum_j F_ij."""
@@ -297,3 +313,14 @@ class ShardedViewFactors:
                                      f"{residual:.2e} (asked {rtol:g}) in channel {c}")
             out[:, c] = b
         return out
+
+
+class _Transposed:
+    """``F.T`` of a :class:`ShardedViewFactors`: only ``@`` (one pass over the shards)."""
+
+    def __init__(self, F: ShardedViewFactors):
+        self.F = F
+        self.shape = F.shape[::-1]
+
+    def __matmul__(self, x):
+        return self.F.rmatvec(x)
