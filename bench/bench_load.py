@@ -10,6 +10,13 @@ imprints are compared for equality.
     python bench/bench_load.py                 # 1k, 8k, 50k, 300k faces; all pairs at 1k
     python bench/bench_load.py --quick         # 1k and 8k
     python bench/bench_load.py --all-pairs 1000 8000
+    python bench/bench_load.py --terrain       # the 581k-triangle OBJ of issue 19: reader and cutting
+
+``--terrain [SIDE]`` writes the height field of :func:`generate_terrain` (540: 581,042 triangles,
+about 45 MB) and times, in the same run, ``read_obj`` line by line (the reader before the bulk
+path; still its path for files it cannot vouch for) against ``read_obj`` as it is, and
+``subdivide_faces`` per face against it with the faces decided at once, then ``load_scene``
+whole, with and without imprinting.
 """
 
 from __future__ import annotations
@@ -95,13 +102,67 @@ def _timed(load) -> tuple[float, object]:
     return time.perf_counter() - t0, scene
 
 
+def _per_face(vertices, faces, size):
+    """``subdivide_faces`` with every face on the per-face path (the cutting before the bulk path)."""
+    import radiosity._patches_bulk as bulk
+    import radiosity.patches as patches
+
+    saved = patches.whole_faces
+    patches.whole_faces = lambda v, f, s: (np.full(len(f), bulk.PER_FACE, np.int8), np.empty((len(f), 4, 3)))
+    try:
+        return patches.subdivide_faces(vertices, faces, size)
+    finally:
+        patches.whole_faces = saved
+
+
+def terrain(side: int, out) -> None:
+    """Time the reader and the cutting on the generated terrain, old way against new, one run."""
+    import radiosity
+    import radiosity.io.obj as obj
+    from radiosity.patches import subdivide_faces
+
+    warnings.simplefilter("ignore", radiosity.RadiosityWarning)
+    folder = Path(__file__).resolve().parent / "results" / "_bench_load"
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"terrain_{side}.obj"
+    faces = generate_terrain(path, side)
+    radiosity.load_scene(radiosity.bundled_scene("cornell_box"))  # warm-up: compiled kernels load once
+
+    def per_line():
+        notes = []
+        text = obj._read_text(path, "OBJ", notes=notes)
+        return obj._finish(path, obj._parse_lines(path, obj._logical_lines(text), notes), notes)
+
+    t_lines, old = _timed(per_line)
+    t_bulk, new = _timed(lambda: obj.read_obj(path))
+    same_data = (np.array_equal(old.vertices, new.vertices) and len(old.faces) == len(new.faces)
+                 and all(np.array_equal(a, b) for a, b in zip(old.faces, new.faces)))
+    t_cut_old, cut_old = _timed(lambda: _per_face(new.vertices, new.faces, None))
+    t_cut_new, cut_new = _timed(lambda: subdivide_faces(new.vertices, new.faces, None))
+    same_cut = cut_old[0].quads.tobytes() == cut_new[0].quads.tobytes()
+    t_plain, _ = _timed(lambda: radiosity.load_scene(path, imprint=False))
+    t_scene, scene = _timed(lambda: radiosity.load_scene(path))
+    row = {"faces": faces, "megabytes": round(path.stat().st_size / 1e6, 1),
+           "read_per_line_s": round(t_lines, 2), "read_bulk_s": round(t_bulk, 2),
+           "read_speedup": round(t_lines / t_bulk, 1), "same_data": bool(same_data),
+           "cut_per_face_s": round(t_cut_old, 2), "cut_bulk_s": round(t_cut_new, 2),
+           "cut_speedup": round(t_cut_old / t_cut_new, 1), "same_patches": bool(same_cut),
+           "load_no_imprint_s": round(t_plain, 2), "load_s": round(t_scene, 2), "patches": scene.n_patches}
+    print_table([row], title=f"terrain {side}x{side} (seconds; ratios measured in this run)")
+    write_json("load_terrain", {"rows": [row], "machine": machine_info()}, out)
+
+
 def main(argv=None) -> None:
     def extra(parser):
         parser.add_argument("--sizes", type=int, nargs="+", default=None, help="face counts")
         parser.add_argument("--all-pairs", type=int, nargs="*", default=[1000],
                         help="sizes at which the all-pairs imprint is also timed (default: 1000)")
+        parser.add_argument("--terrain", type=int, nargs="?", const=540, default=None,
+                            help="time the reader and cutting on a SIDE x SIDE terrain (default 540)")
 
     args = parse_args(__doc__.splitlines()[0], argv, extra)
+    if args.terrain:
+        return terrain(args.terrain, args.out)
     sizes = args.sizes or ([1000, 8000] if args.quick else [1000, 8000, 50_000, 300_000])
 
     import radiosity
