@@ -11,6 +11,7 @@ imprints are compared for equality.
     python bench/bench_load.py --quick         # 1k and 8k
     python bench/bench_load.py --all-pairs 1000 8000
     python bench/bench_load.py --terrain       # the 581k-triangle OBJ of issue 19: reader and cutting
+    python bench/bench_load.py --terrain --whole   # load_scene before (old reader, cutting, rays) / after
 
 ``--terrain [SIDE]`` writes the height field of :func:`generate_terrain` (540: 581,042 triangles,
 about 45 MB) and times, in the same run, ``read_obj`` line by line (the reader before the bulk
@@ -115,8 +116,9 @@ def _per_face(vertices, faces, size):
         patches.whole_faces = saved
 
 
-def terrain(side: int, out) -> None:
-    """Time the reader and the cutting on the generated terrain, old way against new, one run."""
+def terrain(side: int, out, whole: bool) -> None:
+    """Time the reader and the cutting on the generated terrain, old way against new, one run;
+    with ``whole``, ``load_scene`` as it was (all three old paths) against as it is instead."""
     import radiosity
     import radiosity.io.obj as obj
     from radiosity.patches import subdivide_faces
@@ -127,6 +129,11 @@ def terrain(side: int, out) -> None:
     path = folder / f"terrain_{side}.obj"
     faces = generate_terrain(path, side)
     radiosity.load_scene(radiosity.bundled_scene("cornell_box"))  # warm-up: compiled kernels load once
+    if whole:
+        row = _whole_loads(path, faces)
+        print_table([row], title=f"terrain {side}x{side}: load_scene before / after (seconds; this run)")
+        write_json("load_terrain_whole", {"rows": [row], "machine": machine_info()}, out)
+        return
 
     def per_line():
         notes = []
@@ -152,6 +159,50 @@ def terrain(side: int, out) -> None:
     write_json("load_terrain", {"rows": [row], "machine": machine_info()}, out)
 
 
+def _whole_loads(path: Path, faces: int) -> dict:
+    """``load_scene`` (imprint on) with the reader, the cutting and the light-path kernel of
+    before issue 19 item 5, then as it is; the light paths alone, before and after."""
+    import radiosity
+    import radiosity._lightpaths as lightpaths
+    import radiosity._patches_bulk as bulk
+    import radiosity.io.obj as obj
+    import radiosity.patches as patches
+
+    def per_line_reader(p):
+        notes = []
+        p = Path(p)
+        text = obj._read_text(p, "OBJ", notes=notes)
+        return obj._finish(p, obj._parse_lines(p, obj._logical_lines(text), notes), notes)
+
+    saved = (obj.read_obj, patches.whole_faces, lightpaths._CHUNKED_FROM)
+    import radiosity.scene as scene_module
+
+    scene_module.read_obj = per_line_reader
+    patches.whole_faces = lambda v, f, s: (np.full(len(f), bulk.PER_FACE, np.int8), np.empty((len(f), 4, 3)))
+    lightpaths._CHUNKED_FROM = 1 << 62
+    try:
+        t_before, before = _timed(lambda: radiosity.load_scene(path))
+    finally:
+        scene_module.read_obj, patches.whole_faces, lightpaths._CHUNKED_FROM = saved
+    t_after, after = _timed(lambda: radiosity.load_scene(path))
+    same = (before.patch_quads.tobytes() == after.patch_quads.tobytes() and before.notes == after.notes
+            and before.light_paths == after.light_paths)
+    quads, normals = after.patch_quads, after.patch_normal
+    em = after.emission
+    area = after.patch_area
+    args = (quads, normals, em, area, after.patch_object, after.objects, after.scale)
+    lightpaths._CHUNKED_FROM = 1 << 62
+    try:
+        t_rays_before, _ = _timed(lambda: lightpaths.trace_emitters(*args))
+    finally:
+        lightpaths._CHUNKED_FROM = saved[2]
+    t_rays_after, _ = _timed(lambda: lightpaths.trace_emitters(*args))
+    return {"faces": faces, "load_before_s": round(t_before, 1), "load_after_s": round(t_after, 1),
+            "load_speedup": round(t_before / t_after, 1), "same_scene": bool(same),
+            "light_paths_before_s": round(t_rays_before, 1), "light_paths_after_s": round(t_rays_after, 2),
+            "light_paths_speedup": round(t_rays_before / t_rays_after, 1)}
+
+
 def main(argv=None) -> None:
     def extra(parser):
         parser.add_argument("--sizes", type=int, nargs="+", default=None, help="face counts")
@@ -159,10 +210,12 @@ def main(argv=None) -> None:
                         help="sizes at which the all-pairs imprint is also timed (default: 1000)")
         parser.add_argument("--terrain", type=int, nargs="?", const=540, default=None,
                             help="time the reader and cutting on a SIDE x SIDE terrain (default 540)")
+        parser.add_argument("--whole", action="store_true",
+                            help="with --terrain: load_scene before (all old paths) against after")
 
     args = parse_args(__doc__.splitlines()[0], argv, extra)
     if args.terrain:
-        return terrain(args.terrain, args.out)
+        return terrain(args.terrain, args.out, args.whole)
     sizes = args.sizes or ([1000, 8000] if args.quick else [1000, 8000, 50_000, 300_000])
 
     import radiosity
