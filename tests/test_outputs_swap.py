@@ -142,3 +142,26 @@ def test_stale_staging_folders_are_swept(tmp_path):
     assert not beside.exists() and not inside.exists()
     assert (out / "kept").is_dir()  # the user's subfolder went back
     assert alive.exists() and other.exists()
+
+
+def test_outdir_on_another_file_system_than_its_parent_is_staged_inside(tmp_path, monkeypatch):
+    """A mount point: a stage beside it would be on the parent's file system (no rename across)."""
+    out = tmp_path / "out"
+    _old_run(out)
+    real_stat = os.stat
+
+    def other_device(path, *args, **kwargs):
+        info = real_stat(path, *args, **kwargs)
+        if os.fspath(path) == os.fspath(out):
+            fields = list(info)
+            fields[2] += 1  # st_dev
+            return os.stat_result(fields)
+        return info
+
+    monkeypatch.setattr(swap.os, "stat", other_device)
+    with staged_outputs(out, owned=OWNED) as stage:
+        assert stage.parent == out
+        (stage / "summary.json").write_text("new")
+    monkeypatch.setattr(swap.os, "stat", real_stat)
+    assert (out / "summary.json").read_text() == "new" and (out / "drafts" / "a.txt").exists()
+    assert not _leftovers(out)

@@ -7,8 +7,8 @@ write) are hard-linked into the staging folder, and the two folders are exchange
 set from it on, with no moment in between. The old folder, now at the staging path, is then
 removed; user subfolders (which cannot be hard-linked) are moved back from it first.
 
-Where the exchange is not possible (not Linux, a file system without it, OUTDIR a mount point,
-its parent not writable, or OUTDIR the current folder or above it, whose swap would leave the
+Where the exchange is not possible (not Linux, a file system without it, OUTDIR a mount point or
+otherwise on another file system than its parent, its parent not writable, or OUTDIR the current folder or above it, whose swap would leave the
 shell in a deleted folder), the outputs are renamed in one by one, each atomically, as before.
 
 A staging folder's name holds the owning process's id; a later run removes those whose process
@@ -54,7 +54,12 @@ def _can_swap(folder: Path) -> bool:
         here = None
     if here is not None and (here == folder or folder in here.parents):
         return False
-    return folder.parent != folder and _renameat2() is not None
+    if folder.parent == folder or _renameat2() is None:
+        return False
+    try:  # a mount point (a container's volume): beside it is another file system
+        return os.stat(folder).st_dev == os.stat(folder.parent).st_dev
+    except OSError:
+        return False
 
 
 def _renameat2():
