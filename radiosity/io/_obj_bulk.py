@@ -252,8 +252,8 @@ def parse_vertices(buf: np.ndarray, n_lines: int, max_coordinate: float) -> np.n
 def parse_faces(buf: np.ndarray, n_before: np.ndarray, vertices: np.ndarray) -> list[np.ndarray]:
     """0-based corner indices of each ``f`` line, repeated consecutive corners dropped.
 
-    ``buf`` holds the rests of the lines (``Scan.f_bytes``); ``n_before[i]`` is the number of vertices defined before face i (negative references count
-    back from it).
+    ``buf`` holds the rests of the lines (``Scan.f_bytes``); ``n_before[i]`` is the number of
+    vertices defined before face i (negative references count back from it).
     """
     if not len(n_before):
         return []

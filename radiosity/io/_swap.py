@@ -8,8 +8,9 @@ set from it on, with no moment in between. The old folder, now at the staging pa
 removed; user subfolders (which cannot be hard-linked) are moved back from it first.
 
 Where the exchange is not possible (not Linux, a file system without it, OUTDIR a mount point or
-otherwise on another file system than its parent, its parent not writable, or OUTDIR the current folder or above it, whose swap would leave the
-shell in a deleted folder), the outputs are renamed in one by one, each atomically, as before.
+otherwise on another file system than its parent, its parent not writable, or OUTDIR the current
+folder or above it, whose swap would leave the shell in a deleted folder), the outputs are renamed
+in one by one, each atomically, as before.
 
 A staging folder's name holds the owning process's id; a later run removes those whose process
 is gone (after moving back any user subfolder an exchange left in one).
