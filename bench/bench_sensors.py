@@ -10,6 +10,12 @@ Printed per grid: points, wall seconds, microseconds per point, time per point r
 the smallest grid (1.0 for a cost linear in the number of points), and the speed-up over the
 baseline per point (CPU time: wall time on a shared machine measures the neighbours). Run: ``python bench/bench_sensors.py [--quick] [--full] [--preset P]``
 (``--full`` adds the 200k and 1M grids). Writes ``bench/results/sensors.json``.
+
+``--order SIZE`` times, on one grid of SIZE points and in the same run (alternating, twice each),
+the kernel as it was before issue 19 item 6 (blocks of clusters in order, the BVH walked again
+for each exact shadow) against the kernel now (blocks in a fixed shuffle, ``_points.block_order``;
+each partly occluded source's occluders kept from its classification, ``REUSE_WALKS``), and
+checks the two give the same irradiance, bit for bit.
 """
 
 from __future__ import annotations
@@ -70,14 +76,49 @@ def timed(fn) -> tuple[float, object]:
     return time.perf_counter() - t0, value
 
 
+def order_ratio(solution, n: int) -> dict:
+    """Wall and CPU time of the gather before ("in_order") and now ("shuffled"), alternating."""
+    import radiosity.visibility._points as points_module
+
+    shuffled = points_module.block_order
+    in_order = lambda n_clusters: np.arange(len(shuffled(n_clusters)), dtype=np.int64)  # noqa: E731
+    p, nrm = floor_grid(n)
+    times = {"in_order": [], "shuffled": []}
+    values = {}
+    for name in ["in_order", "shuffled", "in_order", "shuffled"]:
+        points_module.block_order = in_order if name == "in_order" else shuffled
+        points_module.REUSE_WALKS = name == "shuffled"
+        solution._sensors = None  # a fresh gather each time: nothing cached between the runs
+        cpu = time.process_time()
+        seconds, values[name] = timed(lambda: solution.irradiance(p, nrm))
+        times[name].append((seconds, time.process_time() - cpu))
+        print(f"  {name}: {seconds:.1f} s wall, {times[name][-1][1]:.1f} s CPU", flush=True)
+    points_module.block_order = shuffled
+    points_module.REUSE_WALKS = True
+    best = {k: min(v) for k, v in times.items()}
+    return {"points": len(p), "in_order_s": best["in_order"][0], "shuffled_s": best["shuffled"][0],
+            "in_order_cpu_s": best["in_order"][1], "shuffled_cpu_s": best["shuffled"][1],
+            "wall_speedup": best["in_order"][0] / best["shuffled"][0],
+            "identical": bool(np.array_equal(values["in_order"], values["shuffled"]))}
+
+
 def main(argv=None) -> None:
     def extra(parser):
         parser.add_argument("--full", action="store_true", help="add the 200k and 1M grids")
         parser.add_argument("--sizes", type=int, nargs="+", default=None, help="grid sizes (points) to time")
         parser.add_argument("--preset", default="default", choices=("draft", "default", "fine"))
+        parser.add_argument("--order", type=int, default=None, metavar="SIZE",
+                            help="only compare blocks in order against shuffled on SIZE points")
 
     args = parse_args(__doc__.splitlines()[0], argv, extra)
     solution = radiosity.solve(radiosity.load_scene(bundled_scene("cornell_box")), preset=args.preset)
+    if args.order:
+        solution.irradiance(*floor_grid(16))  # compile (or load) the kernel outside the timings
+        row = order_ratio(solution, args.order)
+        print_table([row], title="sensor gather: before (in order, walks repeated) vs now (this run)")
+        write_json("sensors_order", {"preset": args.preset, "patches": int(solution.scene.n_patches),
+                                     "rows": [row]}, args.out)
+        return
     sizes = [1_000, 4_000] if args.quick else [1_000, 10_000, 50_000]
     if args.full:
         sizes += [200_000, 1_000_000]

@@ -20,6 +20,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+from ._lightpaths_chunks import first_hits_chunked
+
 __all__ = ["LightPaths", "trace_emitters", "N_RAYS"]
 
 # Rays per side. The shares are fractions of N_RAYS: 1024 rays give them to about +-1.5%
@@ -32,6 +34,9 @@ _OFFSET_REL = 1e-6
 # Up to this many ray-triangle tests numpy is as quick as loading the compiled kernel (about
 # 0.5 s once per process), so small scenes never pay for it.
 _NUMPY_TESTS = 4_000_000
+# From this many triangles on, runs of them are skipped by their boxes (``_lightpaths_chunks``;
+# the same hits as the plain kernel).
+_CHUNKED_FROM = 4096
 # Fixed seed: the same scene always gives the same shares and notes.
 _SEED = 20261201
 
@@ -136,8 +141,9 @@ def _first_hits_compiled(origins, directions, triangles, offset) -> tuple[np.nda
     e2 = np.ascontiguousarray(triangles[:, 2] - v0)
     hit = np.full(len(origins), -1, dtype=np.int64)
     side = np.zeros(len(origins))
-    _first_hits_kernel(np.ascontiguousarray(origins, dtype=np.float64),
-                       np.ascontiguousarray(directions, dtype=np.float64), v0, e1, e2, float(offset), hit, side)
+    kernel = first_hits_chunked if len(triangles) >= _CHUNKED_FROM else _first_hits_kernel
+    kernel(np.ascontiguousarray(origins, dtype=np.float64), np.ascontiguousarray(directions, dtype=np.float64),
+           v0, e1, e2, float(offset), hit, side)
     return hit, side
 
 

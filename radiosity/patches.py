@@ -14,6 +14,7 @@ import numpy as np
 
 from . import _tol
 from ._ngon import GRADED_MIN_CORNERS, graded_pieces
+from ._patches_bulk import DEGENERATE, WHOLE, whole_faces
 from .geometry import centroids_and_areas, triangulate
 
 __all__ = ["Patches", "subdivide_faces"]
@@ -257,32 +258,49 @@ def subdivide_faces(vertices: np.ndarray, faces: list[np.ndarray], max_patch_siz
     -------
     Patches, FaceReport
     """
-    out: list[np.ndarray] = []
-    owner: list[int] = []
     report = FaceReport([], [])
-    for index, face in enumerate(faces):
-        poly = vertices[face]
-        size = float(np.ptp(poly, axis=0).max())
-        area = float(np.linalg.norm(_newell(poly)))
-        if not area > _tol.DEGENERATE_REL * 1e2 * size**2:
+    # Most faces are triangles or convex quads that stay one patch: decided at once (_patches_bulk).
+    verdict, whole = whole_faces(vertices, faces, max_patch_size)
+    counts = (verdict == WHOLE).astype(np.int64)
+    made: dict[int, np.ndarray] = {}
+    for index in np.flatnonzero(verdict != WHOLE).tolist():
+        if verdict[index] == DEGENERATE:
             report.degenerate.append(index)
             continue
-        pieces, deviation = _pieces(poly, size)
-        if deviation:
-            report.nonplanar.append((index, deviation))
-        if deviation and len(poly) == 4 and max_patch_size is not None:
-            cells = _fold_cells(poly, max_patch_size)
-            out.append(cells)
-            owner.extend([index] * len(cells))
-            continue
-        for piece in pieces:
-            if len(piece) == 4:
-                cells = _split_quad(piece, *_quad_cuts(piece, max_patch_size))
-            else:
-                cells = _split_triangle(piece, max_patch_size)
-            out.append(cells)
-            owner.extend([index] * len(cells))
-    quads = np.concatenate(out, axis=0) if out else np.zeros((0, 4, 3))
+        cells = _face_cells(vertices[faces[index]], index, max_patch_size, report)
+        if cells is not None:
+            made[index] = cells
+            counts[index] = len(cells)
+    owner = np.repeat(np.arange(len(faces), dtype=np.int64), counts)
+    quads = np.empty((len(owner), 4, 3))
+    first = np.cumsum(counts) - counts
+    single = verdict == WHOLE
+    quads[first[single]] = whole[single]
+    for index, cells in made.items():
+        quads[first[index]:first[index] + len(cells)] = cells
     _, area = centroids_and_areas(quads)
     keep = area > 0
-    return Patches(quads[keep], np.asarray(owner, dtype=np.int64)[keep]), report
+    return Patches(quads[keep], owner[keep]), report
+
+
+def _face_cells(poly: np.ndarray, index: int, max_patch_size: float | None, report: FaceReport
+                ) -> np.ndarray | None:
+    """Cells of one face (None if it has zero area); notes it in ``report`` if it is degenerate
+    or non-planar."""
+    size = float(np.ptp(poly, axis=0).max())
+    area = float(np.linalg.norm(_newell(poly)))
+    if not area > _tol.DEGENERATE_REL * 1e2 * size**2:
+        report.degenerate.append(index)
+        return None
+    pieces, deviation = _pieces(poly, size)
+    if deviation:
+        report.nonplanar.append((index, deviation))
+    if deviation and len(poly) == 4 and max_patch_size is not None:
+        return _fold_cells(poly, max_patch_size)
+    out = []
+    for piece in pieces:
+        if len(piece) == 4:
+            out.append(_split_quad(piece, *_quad_cuts(piece, max_patch_size)))
+        else:
+            out.append(_split_triangle(piece, max_patch_size))
+    return np.concatenate(out, axis=0) if out else np.zeros((0, 4, 3))

@@ -192,7 +192,7 @@ def run(args) -> int:
             warm_up()
         solution = solve(scene, preset=args.preset, solver=args.solver, progress=sys.stderr.isatty(),
                          **overrides(args))
-        check_free_space(stage, output_bytes(solution.scene.n_patches, 0 if points is None else len(points)))
+        check_free_space(out, output_bytes(solution.scene.n_patches, 0 if points is None else len(points)))
         h = None
         if points is not None:
             h = solution.irradiance(points[:, :3] * to_metres, points[:, 3:], rtol=args.sensor_rtol)

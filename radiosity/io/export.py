@@ -9,7 +9,6 @@ from __future__ import annotations
 import contextlib
 import errno
 import json
-import os
 import shutil
 import tempfile
 from pathlib import Path
@@ -18,12 +17,12 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._files import atomic_path, atomic_paths
+from ._swap import STAGING_PREFIX, make_stage, publish, restore_subfolders, sweep_stale
 
-__all__ = ["atomic_path", "atomic_paths", "staged_outputs", "triangles", "write_summary", "write_ply",
+__all__ = ["STAGING_PREFIX", "atomic_path", "atomic_paths", "staged_outputs", "triangles", "write_summary", "write_ply",
            "write_vtp", "write_png", "write_glb", "write_view_factors", "view_factor_arrays", "write_vf"]
 
 
-STAGING_PREFIX = ".radiosity-partial-"
 
 
 # Bytes a solve's outputs take per patch (VTP + PLY + glb + HTML, measured on the Cornell box:
@@ -52,16 +51,22 @@ def check_free_space(folder: str | Path, needed: int) -> None:
 
 @contextlib.contextmanager
 def staged_outputs(folder: str | Path, owned: tuple[str, ...] = ()):
-    """Yield a hidden staging folder inside ``folder``; move its files into ``folder`` on success.
+    """Yield a hidden staging folder for the outputs of ``folder``; publish them on success.
 
-    Every output of a run is written into the staging folder first. Only when the whole block
-    succeeds are the files renamed into ``folder`` (each rename is atomic), so a run that fails
-    or is interrupted leaves the outputs of an earlier run untouched, not a mix of old and new.
+    Every output of a run is written into the staging folder first (beside ``folder``). Only
+    when the whole block succeeds do the two folders swap places, in one atomic exchange
+    (``io/_swap.py``): ``folder`` holds the whole old set or the whole new one at every moment,
+    so a run that fails or is interrupted, even during the publishing, leaves the outputs of an
+    earlier run untouched. Files of ``folder`` that this run does not own (anything not named
+    in ``owned`` and not written) are the user's: they are kept, hard-linked into the new
+    folder before the swap, and user subfolders are moved over after it. Files named in
+    ``owned`` that this run did not write are dropped, so an earlier run's ``picture.png`` or
+    ``irradiance.csv`` does not pass for this run's. Where the exchange is not possible the
+    files are renamed in one by one (each atomically). The staging folder is removed on every
+    way out, and stale ones of dead processes are swept up on entry.
+
     The folder is created (and checked for writing) on entry, before any long computation; if
-    it was created here and the run fails, it is removed again. Files named in ``owned`` (what
-    this kind of run may write) that this run did not write are removed on success, so an
-    earlier run's ``picture.png`` or ``irradiance.csv`` does not pass for this run's; other
-    files in ``folder`` are left alone.
+    it was created here and the run fails, it is removed again.
 
     Raises
     ------
@@ -74,31 +79,31 @@ def staged_outputs(folder: str | Path, owned: tuple[str, ...] = ()):
     if folder.exists() and not folder.is_dir():
         raise NotADirectoryError(errno.ENOTDIR, "exists and is not a folder; give -o a folder", str(folder))
     created = not folder.exists()
+    target = folder
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        stage = Path(tempfile.mkdtemp(dir=folder, prefix=STAGING_PREFIX))
+        target = folder.resolve()  # a symlink to a folder: its target is what swaps
+        sweep_stale(target)
+        Path(tempfile.mkdtemp(dir=target, prefix=STAGING_PREFIX)).rmdir()  # can we write there?
+        stage, beside = make_stage(target)
     except OSError as exc:
         if created:
             with contextlib.suppress(OSError):
                 folder.rmdir()
         raise OSError(exc.errno, f"cannot write outputs there ({exc.strerror or exc})", str(folder)) from exc
     ok = False
+    swapped: list = []
     try:
         yield stage
-        written = set()
-        for item in sorted(stage.iterdir()):
-            if not item.name.startswith("."):
-                os.replace(item, folder / item.name)
-                written.add(item.name)
-        for name in set(owned) - written:
-            with contextlib.suppress(FileNotFoundError, IsADirectoryError):
-                (folder / name).unlink()
+        publish(stage, target, owned, beside, swapped)
         ok = True
     finally:
+        if swapped:  # the stage path holds the old folder: the user's subfolders go back first
+            restore_subfolders(stage, target)
         shutil.rmtree(stage, ignore_errors=True)
         if not ok and created:
             with contextlib.suppress(OSError):
-                folder.rmdir()  # only if empty
+                target.rmdir()  # only if empty
 
 
 def write_summary(summary: dict, path: str | Path) -> None:

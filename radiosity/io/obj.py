@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import SceneError
+from ._obj_bulk import ACTIVE, F, S, V, Irregular, Scan, parse_faces, parse_vertices, scan_lines, scan_text
 from ._text import excerpt, parse_float, read_input, split_lines
 
 __all__ = ["ObjData", "Material", "read_obj", "read_mtl", "MAX_COORDINATE"]
@@ -111,9 +112,8 @@ def _quoted(path: Path) -> str:
     return text if len(text) <= PATH_CHARS else excerpt(Path(text).name, 60)
 
 
-def _read_lines(path: Path, what: str, referenced_from: str = "", notes: list[str] | None = None
-                ) -> list[tuple[int, str]]:
-    """(line number, text without comment) of each logical line; continuations joined."""
+def _read_text(path: Path, what: str, referenced_from: str = "", notes: list[str] | None = None) -> str:
+    """The file's text: checked (regular, not binary, within the size limit) and decoded."""
     origin = f"{referenced_from}: " if referenced_from else ""
     try:
         data = read_input(path, what)
@@ -133,6 +133,17 @@ def _read_lines(path: Path, what: str, referenced_from: str = "", notes: list[st
         text = data.decode("latin-1")
         if notes is not None:
             notes.append(f"{path}: is not UTF-8 (byte {exc.start}); read as Latin-1")
+    return text
+
+
+def _read_lines(path: Path, what: str, referenced_from: str = "", notes: list[str] | None = None
+                ) -> list[tuple[int, str]]:
+    """(line number, text without comment) of each logical line; continuations joined."""
+    return _logical_lines(_read_text(path, what, referenced_from, notes))
+
+
+def _logical_lines(text: str) -> list[tuple[int, str]]:
+    """(line number, text without comment) of each logical line of ``text``."""
     raw_lines = split_lines(text)  # CR LF, LF and a lone CR (classic Mac) each end a line
     out: list[tuple[int, str]] = []
     pending: list[str] = []
@@ -306,36 +317,116 @@ def read_obj(path) -> ObjData:
     """
     path = Path(path)
     notes: list[str] = []
-    lines = _read_lines(path, "OBJ", notes=notes)
+    text = _read_text(path, "OBJ", notes=notes)
+    try:  # the whole text at once, v and f lines without a Python step each (io/_obj_bulk.py)
+        parsed = _parse_bulk(path, scan_text(text), notes)
+    except Irregular:
+        lines = _logical_lines(text)
+        try:  # v and f lines still at once
+            parsed = _parse_bulk(path, scan_lines(lines), notes)
+        except Irregular:  # line by line: the exact file:line message
+            parsed = _parse_lines(path, lines, notes)
+    return _finish(path, parsed, notes)
+
+
+@dataclass
+class _Parsed:
+    """What the pass over the lines found, before materials and objects are resolved."""
+
+    vertices: np.ndarray
+    faces: list[np.ndarray]
+    face_object: np.ndarray
+    face_material: np.ndarray  # index into material_names, -1 before any usemtl
+    face_line: np.ndarray
+    face_group: np.ndarray  # index into groups of the g/o line before each face (-1: none)
+    groups: list[_GroupLine]
+    objects: list[str]
+    object_index: dict[str, int]
+    library: dict[str, Material]
+    material_names: list[str]
+    material_first_use: dict[str, str]
+    ignored: dict[str, int]
+
+
+class _Statements:
+    """The state the statements other than v and f change, in file order (both parsers)."""
+
+    def __init__(self, path: Path, notes: list[str]):
+        self.path, self.notes = path, notes
+        self.objects: list[str] = []
+        self.object_index: dict[str, int] = {}
+        self.library: dict[str, Material] = {}
+        self.material_names: list[str] = []
+        self.material_id: dict[str, int] = {}
+        self.material_first_use: dict[str, str] = {}
+        self.ignored: dict[str, int] = {}
+        self.groups: list[_GroupLine] = []
+        self.current_object = -1
+        self.current_material = -1
+        self.run_start = 0  # first face after the last g, o or usemtl line
+
+    def default_object(self) -> int:
+        """The object of faces before any o/g line: the file's name."""
+        index = self.object_index.setdefault(self.path.stem, len(self.objects))
+        if index == len(self.objects):
+            self.objects.append(self.path.stem)
+        return index
+
+    def take(self, number: int, keyword: str, tokens: list[str], previous: str, n_faces: int) -> None:
+        """Apply one statement (not v, f); ``previous``: keyword of the statement before it
+        (s lines aside), ``n_faces``: faces before it."""
+        where = f"{self.path}:{number}"
+        if keyword in ("o", "g", "usemtl"):
+            if keyword != "usemtl":
+                self.groups.append(_GroupLine(number, keyword, " ".join(tokens), n_faces, self.run_start,
+                                              previous == "f"))
+            elif self.groups and previous in ("g", "o", "usemtl") and self.groups[-1].at == n_faces:
+                self.groups[-1].next_material = self.groups[-1].next_material or " ".join(tokens)
+            self.run_start = n_faces
+        if keyword in ("o", "g"):
+            name = " ".join(tokens) if tokens else f"unnamed_{number}"
+            if name not in self.object_index:
+                self.object_index[name] = len(self.objects)
+                self.objects.append(name)
+            self.current_object = self.object_index[name]
+        elif keyword == "mtllib":
+            if not tokens:
+                raise SceneError(f"{where}: mtllib needs a file name")
+            for mtl in _mtl_paths(self.path.parent, tokens):
+                self.library.update(read_mtl(mtl, referenced_from=where, notes=self.notes))
+        elif keyword == "usemtl":
+            if not tokens:
+                raise SceneError(f"{where}: usemtl needs a material name")
+            name = " ".join(tokens)
+            if name not in self.material_id:
+                self.material_first_use[name] = where
+                self.material_id[name] = len(self.material_names)
+                self.material_names.append(name)
+            self.current_material = self.material_id[name]
+        elif keyword in _IGNORED_ELEMENTS:
+            self.ignored[keyword] = self.ignored.get(keyword, 0) + 1
+
+    def parsed(self, vertices, faces, face_object, face_material, face_line, face_group) -> _Parsed:
+        return _Parsed(np.asarray(vertices, dtype=float).reshape(-1, 3), faces,
+                       np.asarray(face_object, dtype=np.int64), np.asarray(face_material, dtype=np.int64),
+                       np.asarray(face_line, dtype=np.int64), np.asarray(face_group, dtype=np.int64), self.groups,
+                       self.objects, self.object_index, self.library, self.material_names,
+                       self.material_first_use, self.ignored)
+
+
+def _parse_lines(path: Path, lines: list[tuple[int, str]], notes: list[str]) -> _Parsed:
+    """The file line by line: every check in file order, so the first problem is the one named."""
+    state = _Statements(path, notes)
     vertices: list[list[float]] = []
     faces: list[np.ndarray] = []
     face_object: list[int] = []
-    face_material: list[int] = []  # index into material_names, resolved at the end
+    face_material: list[int] = []
     face_line: list[int] = []
-    objects: list[str] = []
-    object_index: dict[str, int] = {}
-    library: dict[str, Material] = {}
-    material_names: list[str] = []
-    material_id: dict[str, int] = {}
-    material_first_use: dict[str, str] = {}
-    ignored: dict[str, int] = {}
-    current_object = -1
-    current_material = -1
-    groups: list[_GroupLine] = []
-    face_group: list[int] = []  # index into groups of the g/o line before each face (-1: none)
+    face_group: list[int] = []
     previous = ""  # keyword of the previous statement (s lines do not count)
-    run_start = 0  # first face after the last g, o or usemtl line
     for number, line in lines:
         keyword, *tokens = line.split()
         where = f"{path}:{number}"
-        if keyword in ("o", "g", "usemtl"):
-            if keyword != "usemtl":
-                groups.append(_GroupLine(number, keyword, " ".join(tokens), len(faces), run_start, previous == "f"))
-            elif groups and previous in ("g", "o", "usemtl") and groups[-1].at == len(faces):
-                groups[-1].next_material = groups[-1].next_material or " ".join(tokens)
-            run_start = len(faces)
-        if keyword != "s":
-            previous = keyword
         if keyword == "v":
             xyz = _floats(tokens, 3, where, f"vertex {len(vertices) + 1}")
             if max(abs(c) for c in xyz) > MAX_COORDINATE:
@@ -350,75 +441,98 @@ def read_obj(path) -> ObjData:
             # Drop repeated consecutive corners (f 1 2 2 3, or two vertices at the same point):
             # they add zero-length edges. A face left with fewer than 3 has zero area.
             idx = [v for k, v in enumerate(idx) if v != idx[k - 1] and vertices[v] != vertices[idx[k - 1]]] or idx[:1]
-            if current_object < 0:
-                current_object = object_index.setdefault(path.stem, len(objects))
-                if current_object == len(objects):
-                    objects.append(path.stem)
+            if state.current_object < 0:
+                state.current_object = state.default_object()
             faces.append(np.asarray(idx, dtype=np.int64))
-            face_object.append(current_object)
-            face_group.append(len(groups) - 1)
-            face_material.append(current_material)
+            face_object.append(state.current_object)
+            face_group.append(len(state.groups) - 1)
+            face_material.append(state.current_material)
             face_line.append(number)
-        elif keyword in ("o", "g"):
-            name = " ".join(tokens) if tokens else f"unnamed_{number}"
-            if name not in object_index:
-                object_index[name] = len(objects)
-                objects.append(name)
-            current_object = object_index[name]
-        elif keyword == "mtllib":
-            if not tokens:
-                raise SceneError(f"{where}: mtllib needs a file name")
-            for mtl in _mtl_paths(path.parent, tokens):
-                library.update(read_mtl(mtl, referenced_from=where, notes=notes))
-        elif keyword == "usemtl":
-            if not tokens:
-                raise SceneError(f"{where}: usemtl needs a material name")
-            name = " ".join(tokens)
-            if name not in material_id:
-                material_first_use[name] = where
-                material_id[name] = len(material_names)
-                material_names.append(name)
-            current_material = material_id[name]
-        elif keyword in _IGNORED_ELEMENTS:
-            ignored[keyword] = ignored.get(keyword, 0) + 1
-    if not faces:
+        else:
+            state.take(number, keyword, tokens, previous, len(faces))
+        if keyword != "s":
+            previous = keyword
+    return state.parsed(vertices, faces, face_object, face_material, face_line, face_group)
+
+
+def _parse_bulk(path: Path, scan: Scan, notes: list[str]) -> _Parsed:
+    """The file with its v and f lines parsed at once (``_obj_bulk``); Irregular where that path
+    cannot vouch for a line, before any other statement is applied."""
+    kind, numbers = scan.kind, scan.numbers
+    is_v, is_f = kind == V, kind == F
+    f_rows = np.flatnonzero(is_f)
+    vertices = parse_vertices(scan.v_bytes, int(is_v.sum()), MAX_COORDINATE)
+    n_before = np.cumsum(is_v)[f_rows]  # vertices defined before each face (a face line is not one)
+    faces = parse_faces(scan.f_bytes, n_before, vertices)
+    # The statements that change state, in file order; faces take the state of the last one before them.
+    state = _Statements(path, notes)
+    active = np.flatnonzero(kind == ACTIVE)
+    f_before = np.cumsum(is_f) - is_f  # faces before each line
+    counted = np.flatnonzero(kind != S)  # lines whose keyword is "the previous statement" for the next
+    previous_row = np.searchsorted(counted, active) - 1
+    first_face = f_rows[0] if len(f_rows) else len(kind)
+    first_named = next((i for i in active.tolist() if scan.words[i][0] in ("o", "g")), len(kind))
+    if first_face < first_named:  # the first face comes before any o/g line
+        state.current_object = state.default_object()
+    marks = [(0, state.current_object, -1, -1)]  # (first face it holds for, object, material, group)
+    for i, p in zip(active.tolist(), previous_row.tolist()):
+        keyword, rest = scan.words[i]
+        previous = _keyword(scan, int(counted[p])) if p >= 0 else ""
+        state.take(int(numbers[i]), keyword, rest.split(), previous, int(f_before[i]))
+        marks.append((int(f_before[i]), state.current_object, state.current_material, len(state.groups) - 1))
+    at = np.array([m[0] for m in marks], dtype=np.int64)
+    table = np.array([m[1:] for m in marks], dtype=np.int64)
+    which = np.searchsorted(at, np.arange(len(faces)), side="right") - 1  # the last mark at or before the face
+    face_object, face_material, face_group = table[which].T
+    return state.parsed(vertices, faces, face_object, face_material, numbers[f_rows], face_group)
+
+
+def _keyword(scan: Scan, row: int) -> str:
+    kind = scan.kind[row]
+    return "v" if kind == V else "f" if kind == F else scan.words[row][0]
+
+
+def _finish(path: Path, p: _Parsed, notes: list[str]) -> ObjData:
+    """Resolve materials, trailing group names and object numbers; the notes about faces."""
+    if not p.faces:
         raise SceneError(f"{path}: the scene has no faces (no 'f' lines)")
-    trailing = _trailing_groups(groups, face_group, [material_names[m] if m >= 0 else "" for m in face_material])
+    face_object = p.face_object.copy()
+    names = np.array(p.material_names + [""], dtype=object)  # -1 (no usemtl) reads ""
+    face_group = p.face_group.tolist()
+    trailing = _trailing_groups(p.groups, face_group, names[p.face_material])
     if trailing:
-        for f, k in enumerate(face_group):
-            if k >= 0:
-                face_object[f] = object_index[groups[k].name or f"unnamed_{groups[k].line}"]
-        notes.append(_trailing_note(path, groups, trailing, face_group, face_line))
+        group_object = np.array([p.object_index[g.name or f"unnamed_{g.line}"] for g in p.groups] + [-1], np.int64)
+        grouped = np.asarray(face_group, dtype=np.int64)
+        face_object = np.where(grouped >= 0, group_object[grouped], face_object)
+        notes.append(_trailing_note(path, p.groups, trailing, face_group, p.face_line.tolist()))
 
     # Materials are resolved after the whole file is read: mtllib may come after usemtl.
-    used_materials = sorted({m for m in face_material if m >= 0})
-    for m in used_materials:
-        name = material_names[m]
-        if name not in library:
-            known = ", ".join(sorted(library)) or "none (no mtllib in the file)"
-            raise SceneError(f"{material_first_use[name]}: unknown material {excerpt(name)!r}; "
+    used_materials = np.unique(p.face_material[p.face_material >= 0])
+    for m in used_materials.tolist():
+        name = p.material_names[m]
+        if name not in p.library:
+            known = ", ".join(sorted(p.library)) or "none (no mtllib in the file)"
+            raise SceneError(f"{p.material_first_use[name]}: unknown material {excerpt(name)!r}; "
                              f"defined: {excerpt(known)}")
-    material_remap = {old: new for new, old in enumerate(used_materials)}
-    material_remap[-1] = -1
+    material_remap = np.full(len(p.material_names) + 1, -1, np.int64)  # the last entry: -1 stays -1
+    material_remap[used_materials] = np.arange(len(used_materials))
 
-    used_objects = sorted(set(face_object))
-    remap = {old: new for new, old in enumerate(used_objects)}
-    n_bare = sum(1 for m in face_material if m < 0)
-    if n_bare:
-        first = face_line[face_material.index(-1)]
-        notes.append(f"{path}:{first}: {n_bare} face(s) come before any usemtl and have no material; "
-                     "they absorb everything and emit nothing (Kd 0, Ke 0)")
-    for keyword, count in ignored.items():
+    used_objects = np.unique(face_object)
+    bare = np.flatnonzero(p.face_material < 0)
+    if len(bare):
+        notes.append(f"{path}:{p.face_line[bare[0]]}: {len(bare)} face(s) come before any usemtl and have no "
+                     "material; they absorb everything and emit nothing (Kd 0, Ke 0)")
+    for keyword, count in p.ignored.items():
         notes.append(f"{path}: {count} '{keyword}' ({_IGNORED_ELEMENTS[keyword]}) element(s) ignored; "
                      "only faces take part in radiosity")
     return ObjData(
         path=path,
-        vertices=np.asarray(vertices, dtype=float).reshape(-1, 3),
-        faces=faces,
-        face_object=np.asarray([remap[o] for o in face_object], dtype=np.int64),
-        face_material=np.asarray([material_remap[m] for m in face_material], dtype=np.int64),
-        face_line=np.asarray(face_line, dtype=np.int64),
-        objects=[objects[o] for o in used_objects],
-        materials=[library[material_names[m]] for m in used_materials],
+        vertices=p.vertices,
+        faces=p.faces,
+        face_object=np.searchsorted(used_objects, face_object).astype(np.int64),
+        face_material=material_remap[p.face_material],
+        face_line=p.face_line,
+        objects=[p.objects[o] for o in used_objects.tolist()],
+        materials=[p.library[p.material_names[m]] for m in used_materials.tolist()],
         warnings=notes,
     )

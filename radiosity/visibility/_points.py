@@ -28,11 +28,14 @@ from scipy.spatial import ConvexHull, QhullError
 from ._constants import MAX_UNION, PLANE_REL
 from ._occluders import Occluders, build_occluders
 
-__all__ = ["SensorGather", "clusters", "inside_hull"]
+__all__ = ["SensorGather", "block_order", "clusters", "inside_hull"]
 
 # Receiver points per cluster: the cluster's box is classified against each source once, and
 # only the partly occluded boxes are classified point by point.
 CLUSTER_SIZE = 32
+# Keep the occluders a point's classification finds for its exact shadows (bench_sensors turns
+# it off to time the kernel as it was).
+REUSE_WALKS = True
 
 
 def clusters(points: np.ndarray, size: int = CLUSTER_SIZE) -> tuple[np.ndarray, np.ndarray]:
@@ -50,6 +53,15 @@ def clusters(points: np.ndarray, size: int = CLUSTER_SIZE) -> tuple[np.ndarray, 
     members = np.argsort(code, kind="stable").astype(np.int64)
     starts = np.r_[np.arange(0, len(points), size), len(points)].astype(np.int64)
     return members, starts
+
+
+def block_order(n_clusters: int) -> np.ndarray:
+    """A fixed shuffle of the kernel's blocks of clusters (``_points_kernel.sensor_irradiance``):
+    each thread then gets costly and cheap regions alike, whatever the scene."""
+    from ._points_kernel import _CLUSTER_BLOCK
+
+    n_blocks = -(-n_clusters // _CLUSTER_BLOCK)
+    return np.random.default_rng(0).permutation(n_blocks).astype(np.int64)
 
 
 def inside_hull(points: np.ndarray, vertices: np.ndarray, tol: float) -> np.ndarray:
@@ -143,7 +155,8 @@ class SensorGather:
         h, ok, n_exact = sensor_irradiance(
             x, nx, members, starts, self.quads, self.normals, self.centroid, self.radiosity, self.lit, occ.polys,
             occ.normal, occ.center, occ.inward, occ.lo, occ.hi, occ.node_lo, occ.node_hi, occ.node_left, occ.node_right,
-            occ.node_start, occ.node_count, occ.order, self.tol, self.tol, float(rtol), MAX_UNION)
+            occ.node_start, occ.node_count, occ.order, self.tol, self.tol, float(rtol), MAX_UNION,
+            block_order(len(starts) - 1), REUSE_WALKS)
         self.n_exact += int(n_exact.sum())
         bad = np.flatnonzero(~ok)
         if len(bad):

@@ -197,12 +197,15 @@ _SEEN_FLOOR = 1e-12
 
 # Clusters of receiver points per parallel task (scratch is allocated per task).
 _CLUSTER_BLOCK = 4
+# Occluder entries kept per point for the exact shadows: this many per lit source, at least _POOL_MIN.
+_POOL_PER_SOURCE = 8
+_POOL_MIN = 4096
 
 
 @njit(cache=True)
 def _cluster_block(c0, c1, x, nx, members, cstart, quads, normals, centroid, radiosity, lit, polys, onormal, center,
                    inward, olo, ohi, node_lo, node_hi, node_left, node_right, node_start, node_count, order, pad,
-                   tol, rtol, max_union, out, ok, n_exact):
+                   tol, rtol, max_union, out, ok, n_exact, reuse):
     """Clusters c0..c1-1 of :func:`sensor_irradiance`.
 
     Each (cluster, source) pair is classified first, from the cluster's box: a free or fully
@@ -253,6 +256,10 @@ def _cluster_block(c0, c1, x, nx, members, cstart, quads, normals, centroid, rad
     key = np.empty(n_lit)
     rest = np.empty((n_lit + 1, 3))
     h = np.zeros(3)
+    # the partly occluding occluders of each candidate, kept from its classification
+    pool = np.empty(max(_POOL_MIN, _POOL_PER_SOURCE * n_lit), np.int64)
+    cand_at = np.empty(n_lit, np.int64)
+    cand_count = np.empty(n_lit, np.int64)
     for cl in range(c0, c1):
         if n_occ:
             for c in range(3):
@@ -289,24 +296,31 @@ def _cluster_block(c0, c1, x, nx, members, cstart, quads, normals, centroid, rad
             _point_value(p, x, nx, quads, normals, centroid, radiosity, lit, status, polys, onormal, center, inward,
                          olo, ohi, node_lo, node_hi, node_left, node_right, node_start, node_count, order, pad, tol,
                          rtol, max_union, out, ok, n_exact, stack, occ, lo, hi, si, sj, outside, valid, gi, gj, caps,
-                         stamp, src_cap, a, b, s1, s2, hp, hn, levels, lcount, nxt, sa, sb, cand, cand_f, key, rest, h)
+                         stamp, src_cap, a, b, s1, s2, hp, hn, levels, lcount, nxt, sa, sb, cand, cand_f, key, rest, h,
+                         pool, cand_at, cand_count, reuse)
 
 
 @njit(cache=True)
 def _point_value(p, x, nx, quads, normals, centroid, radiosity, lit, status, polys, onormal, center, inward, olo,
                  ohi, node_lo, node_hi, node_left, node_right, node_start, node_count, order, pad, tol, rtol,
                  max_union, out, ok, n_exact, stack, occ, lo, hi, si, sj, outside, valid, gi, gj, caps, stamp, src_cap,
-                 a, b, s1, s2, hp, hn, levels, lcount, nxt, sa, sb, cand, cand_f, key, rest, h):
-    """Irradiance at point p, given the status of its cluster against each lit source."""
+                 a, b, s1, s2, hp, hn, levels, lcount, nxt, sa, sb, cand, cand_f, key, rest, h, pool, cand_at,
+                 cand_count, reuse):
+    """Irradiance at point p, given the status of its cluster against each lit source.
+
+    A partly occluded source's occluders are written to ``pool`` by the classification that
+    finds it partly occluded, and its exact shadow reads them from there: the same walk gives
+    the same list, so the walk is not repeated (it is when the pool is full).
+    """
     n_lit = lit.shape[0]
     ns = quads.shape[1]
     xp = x[p]
     np_ = nx[p]
     vi = x[p:p + 1]  # the point as a one-vertex receiver
-    none = occ[:0]
     h[:] = 0.0
     unoccluded = np.zeros(3)
     n_cand = 0
+    used = 0
     for t in range(n_lit):
         if status[t] == 1:
             continue
@@ -327,15 +341,23 @@ def _point_value(p, x, nx, quads, normals, centroid, radiosity, lit, status, pol
         for c in range(3):
             unoccluded[c] += f * radiosity[j, c]
         st = status[t]
+        n_maybe = 0
         if st == 2:
             _cap(xp, quads[j], ns, src_cap)
-            st, _ = _classify_hull(vi, quads[j], polys, onormal, center, inward, olo, ohi, node_lo, node_hi,
-                                   node_left, node_right, node_start, node_count, order, pad, tol, none, stack,
-                                   lo, hi, si, sj, outside, valid, gi, gj, caps, stamp, p, src_cap)
+            st, n_maybe = _classify_hull(vi, quads[j], polys, onormal, center, inward, olo, ohi, node_lo, node_hi,
+                                         node_left, node_right, node_start, node_count, order, pad, tol,
+                                         pool[used:], stack, lo, hi, si, sj, outside, valid, gi, gj, caps, stamp, p,
+                                         src_cap)
         if st == 0:
             for c in range(3):
                 h[c] += f * radiosity[j, c]
         elif st == 2:
+            if reuse and used + n_maybe <= pool.shape[0]:
+                cand_at[n_cand] = used
+                cand_count[n_cand] = n_maybe
+                used += n_maybe
+            else:
+                cand_at[n_cand] = -1  # the pool is full: walk again for its exact shadow
             cand[n_cand] = j
             cand_f[n_cand] = f
             key[n_cand] = -f * (radiosity[j, 0] + radiosity[j, 1] + radiosity[j, 2])
@@ -361,13 +383,19 @@ def _point_value(p, x, nx, quads, normals, centroid, radiosity, lit, status, pol
                 break
             j = cand[srt[q]]
             f = cand_f[srt[q]]
-            _cap(xp, quads[j], ns, src_cap)
-            _, n_maybe = _classify_hull(vi, quads[j], polys, onormal, center, inward, olo, ohi, node_lo,
-                                        node_hi, node_left, node_right, node_start, node_count, order, pad,
-                                        tol, occ, stack, lo, hi, si, sj, outside, valid, gi, gj, caps, stamp, p,
-                                        src_cap)
-            hidden, good = _point_hidden(xp, np_, quads[j], normals[j], occ, 0, n_maybe, polys, onormal, tol,
-                                         max_union, a, b, s1, s2, hp, hn, levels, lcount, nxt, sa, sb)
+            at = cand_at[srt[q]]
+            if at >= 0:
+                hidden, good = _point_hidden(xp, np_, quads[j], normals[j], pool, at, at + cand_count[srt[q]], polys,
+                                             onormal, tol, max_union, a, b, s1, s2, hp, hn, levels, lcount, nxt, sa,
+                                             sb)
+            else:
+                _cap(xp, quads[j], ns, src_cap)
+                _, n_maybe = _classify_hull(vi, quads[j], polys, onormal, center, inward, olo, ohi, node_lo,
+                                            node_hi, node_left, node_right, node_start, node_count, order, pad,
+                                            tol, occ, stack, lo, hi, si, sj, outside, valid, gi, gj, caps, stamp, p,
+                                            src_cap)
+                hidden, good = _point_hidden(xp, np_, quads[j], normals[j], occ, 0, n_maybe, polys, onormal, tol,
+                                             max_union, a, b, s1, s2, hp, hn, levels, lcount, nxt, sa, sb)
             n_exact[p] += 1
             if not good:
                 ok[p] = False
@@ -385,10 +413,16 @@ def _point_value(p, x, nx, quads, normals, centroid, radiosity, lit, status, pol
 @njit(cache=True, parallel=True)
 def sensor_irradiance(x, nx, members, cstart, quads, normals, centroid, radiosity, lit, polys, onormal, center,
                       inward, olo, ohi, node_lo, node_hi, node_left, node_right, node_start, node_count, order, pad,
-                      tol, rtol, max_union):
+                      tol, rtol, max_union, block_order, reuse):
     """Irradiance (m, 3) at points x with unit normals nx from the lit patches ``lit``.
 
     The points are grouped in clusters: cluster c holds points ``members[cstart[c]:cstart[c + 1]]``.
+    Blocks of ``_CLUSTER_BLOCK`` clusters are taken in the order ``block_order`` (a permutation
+    of the blocks): the parallel loop gives each thread one contiguous run of it, and a shuffled
+    order spreads the costly points (penumbrae) evenly over the threads, where runs of
+    neighbouring clusters left one thread with most of them. A point's value does not depend
+    on the order. ``reuse``: keep each partly occluded source's occluders from its classification
+    for its exact shadow (False walks the BVH again, as before; the same values either way).
 
     Returns
     -------
@@ -405,9 +439,10 @@ def sensor_irradiance(x, nx, members, cstart, quads, normals, centroid, radiosit
     n_exact = np.zeros(m, np.int64)
     n_clusters = cstart.shape[0] - 1
     n_blocks = (n_clusters + _CLUSTER_BLOCK - 1) // _CLUSTER_BLOCK
-    for blk in prange(n_blocks):
+    for i in prange(n_blocks):
+        blk = block_order[i]
         _cluster_block(blk * _CLUSTER_BLOCK, min(n_clusters, (blk + 1) * _CLUSTER_BLOCK), x, nx, members, cstart,
                        quads, normals, centroid, radiosity, lit, polys, onormal, center, inward, olo, ohi, node_lo,
                        node_hi, node_left, node_right, node_start, node_count, order, pad, tol, rtol, max_union, out,
-                       ok, n_exact)
+                       ok, n_exact, reuse)
     return out, ok, n_exact

@@ -1,0 +1,108 @@
+"""The common faces of ``subdivide_faces`` decided at once: triangles and convex planar quads
+that stay one patch, and faces of zero area.
+
+A scanned or exported mesh is hundreds of thousands of small triangles, each one patch; the
+per-face path (``patches._face_cells``) costs some 50 us a face in numpy calls. Here the same
+tests run on arrays, with a margin: a face whose test is closer to its threshold than round-off
+could explain (``_MARGIN``) is left to the per-face path, so every face is decided as that path
+decides it, and a patch made here is the one it would make, bit for bit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import _tol
+
+__all__ = ["whole_faces"]
+
+# Relative distance from a threshold below which a face goes to the per-face path: far above
+# the round-off of these few products and sums (about 1e-15), far below any real margin.
+_MARGIN = 1e-7
+WHOLE, DEGENERATE, PER_FACE = 0, 1, 2
+
+
+def whole_faces(vertices: np.ndarray, faces: list[np.ndarray], max_size: float | None
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """(n,) verdict per face (WHOLE, DEGENERATE or PER_FACE) and (n, 4, 3) the patch of each
+    WHOLE face (other rows are unset)."""
+    n = len(faces)
+    verdict = np.full(n, PER_FACE, np.int8)
+    cells = np.empty((n, 4, 3))
+    if not n:
+        return verdict, cells
+    sizes = np.fromiter(map(len, faces), np.int64, n)
+    offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    flat = np.concatenate(faces).astype(np.int64, copy=False)
+    for k in (3, 4):
+        rows = np.flatnonzero(sizes == k)
+        if len(rows):
+            poly = vertices[flat[offsets[rows, None] + np.arange(k)]]
+            verdict[rows], cell = _decide(poly, max_size)
+            cells[rows] = cell
+    return verdict, cells
+
+
+def _decide(poly: np.ndarray, max_size: float | None) -> tuple[np.ndarray, np.ndarray]:
+    k = poly.shape[1]
+    size = (poly.max(axis=1) - poly.min(axis=1)).max(axis=1)  # np.ptp(poly, axis=0).max()
+    normal = _newell(poly)
+    area = np.sqrt((normal * normal).sum(axis=1))
+    floor = _tol.DEGENERATE_REL * 1e2 * size**2  # as in subdivide_faces
+    verdict = np.full(len(poly), PER_FACE, np.int8)
+    verdict[area < floor * (1 - _MARGIN)] = DEGENERATE
+    whole = area > floor * (1 + _MARGIN)
+    if k == 3:
+        cell = np.concatenate([poly, poly[:, 2:3]], axis=1)
+        edges = [np.linalg.norm(poly[:, (i + 1) % 3] - poly[:, i], axis=1) for i in range(3)]
+    else:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            unit = normal / area[:, None]
+        deviation = np.abs(np.einsum("fvc,fc->fv", poly - poly.mean(axis=1, keepdims=True), unit)).max(axis=1)
+        whole &= deviation < _tol.PLANAR_REL * size * (1 - _MARGIN)  # planar_parts keeps it whole
+        whole &= _convex(poly, unit)
+        cell = _bilinear_corners(poly)
+        a, b, c, d = (poly[:, i] for i in range(4))
+        edges = [np.maximum(np.linalg.norm(b - a, axis=1), np.linalg.norm(c - d, axis=1)),
+                 np.maximum(np.linalg.norm(d - a, axis=1), np.linalg.norm(c - b, axis=1))]
+    if max_size is not None:  # uncut: every (paired) edge needs one cut only, by a clear margin
+        for length in edges:
+            whole &= length / max_size - 1e-9 < 1.0 - _MARGIN
+    verdict[whole] = WHOLE
+    return verdict, cell
+
+
+def _newell(poly: np.ndarray) -> np.ndarray:
+    """``patches._newell_small`` on (m, k, 3) arrays, the same operations in the same order."""
+    k = poly.shape[1]
+    mean = poly[:, 0].copy()
+    for v in range(1, k):
+        mean += poly[:, v]
+    mean /= k
+    a = poly - mean[:, None]
+    out = np.zeros((len(poly), 3))
+    for i in range(k):
+        p, q = a[:, i], a[:, (i + 1) % k]
+        out[:, 0] += p[:, 1] * q[:, 2] - p[:, 2] * q[:, 1]
+        out[:, 1] += p[:, 2] * q[:, 0] - p[:, 0] * q[:, 2]
+        out[:, 2] += p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0]
+    return 0.5 * out
+
+
+def _convex(poly: np.ndarray, unit: np.ndarray) -> np.ndarray:
+    """``patches._is_convex`` by a clear margin (each turn well above zero)."""
+    edges = np.roll(poly, -1, axis=1) - poly
+    after = np.roll(edges, -1, axis=1)
+    turns = np.einsum("fvc,fc->fv", np.cross(edges, after), unit)
+    scale = np.linalg.norm(edges, axis=2) * np.linalg.norm(after, axis=2)
+    return (turns > _MARGIN * scale).all(axis=1)
+
+
+def _bilinear_corners(quad: np.ndarray) -> np.ndarray:
+    """``patches._split_quad(quad, 1, 1)`` for (m, 4, 3) quads: the same sums, bit for bit."""
+    a, b, c, d = (quad[:, i] for i in range(4))
+
+    def at(u: float, v: float) -> np.ndarray:
+        return (1 - u) * (1 - v) * a + u * (1 - v) * b + u * v * c + (1 - u) * v * d
+
+    return np.stack([at(0.0, 0.0), at(1.0, 0.0), at(1.0, 1.0), at(0.0, 1.0)], axis=1)
