@@ -15,6 +15,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import _tol
+from ._fill_kernel import once_factors, reciprocal_pairs
 from .formfactors import lambert_pairs
 from .quadrature import pair_factors, patch_points
 
@@ -262,6 +263,10 @@ def fill_block(quads, normals, centroid, area, visibility, settings: FillSetting
                active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, FillStats]:
     """One block of the fill: the pairs (i, j > i) with i in rows ``start:stop``, and their mirrors.
 
+    Each unordered pair is integrated once, over its smaller patch (form factor and visibility),
+    and mirrored by reciprocity, ``F(j -> i) = A_i F(i -> j) / A_j`` (see
+    :mod:`radiosity._fill_kernel`).
+
     The unit of work of :func:`assemble`, of the Dask tasks (:mod:`radiosity.cluster`) and of
     the out-of-core writer (:mod:`radiosity.shards`): a block's result depends only on the
     geometry, the settings and its rows, so however blocks are scheduled, F is the same bit for bit.
@@ -284,19 +289,22 @@ def fill_block(quads, normals, centroid, area, visibility, settings: FillSetting
     keep = j > i
     if active is not None:
         keep &= active[j]
-    half = int(keep.sum())
-    i, j = np.concatenate([i[keep], j[keep]]), np.concatenate([j[keep], i[keep]])
-    if not len(i):
+    if not keep.any():
         empty = np.zeros(0, np.int64)
         return empty, empty, np.zeros(0), stats
+    # each unordered pair once, the smaller patch receiving; its mirror by reciprocity (below)
+    i, j = reciprocal_pairs(area, i[keep], j[keep])
     t0 = time.perf_counter()
-    f = unoccluded_factors(quads, normals, centroid, area, i, j, settings)
+    f = once_factors(quads, normals, centroid, area, i, j, rtol=settings.formfactor_rtol,
+                     max_points=_tol.PAIR_MAX_POINTS)
     t1 = time.perf_counter()
     stats.seconds_formfactors += t1 - t0
     if visibility is not None:
-        _apply_visibility(f, quads, centroid, i, j, visibility, settings, stats, half=half)
+        _apply_visibility(f, quads, centroid, i, j, visibility, settings, stats)
         stats.seconds_visibility += time.perf_counter() - t1
         stats.n_rays = visibility.n_rays - rays_before
+    ratio = np.divide(area[i], area[j], out=np.zeros(len(i)), where=area[j] > 0)  # A_j >= A_i
+    i, j, f = np.concatenate([i, j]), np.concatenate([j, i]), np.concatenate([f, f * ratio])
     keep = f > _tol.DROP_FACTOR
     stats.dropped_mass += float((f[~keep] * area[i[~keep]]).sum())
     stats.n_pairs += len(i)

@@ -1,0 +1,200 @@
+"""The fill's separated pairs in one compiled pass, each unordered pair once (reciprocity).
+
+:func:`radiosity.quadrature.pair_factors` serves any pair, and for a well separated pair (its
+a-priori Gauss order p > 0) it costs a sequence of numpy passes around the Lambert kernel: unique
+receivers, their Gauss points and repeated normals as arrays, a sort by source, gathers. On the
+plates of issue 15 (1,048,576 pairs, all separated) those passes and the kernel's gathers took
+about two thirds of the fill. :func:`separated_factors` does the same arithmetic (the receiver's
+order-p Gauss points of :func:`radiosity.quadrature.split_patch_points`, or its centroid for
+p = 1, and Lambert's closed form in the one-source lane loops) in one parallel loop over runs of
+pairs sharing a source: each run writes its receivers' points straight into the lanes.
+
+:func:`reciprocal_pairs` orients each unordered pair so that the smaller patch receives (its
+integral is the cheaper and the better conditioned: rho in the a-priori bound grows as the
+receiver shrinks), and the fill mirrors it, F(j -> i) = A_i F(i -> j) / A_j: reciprocity holds
+for the exact factors of flat patches, one-sided or clipped, so the mirror has the same relative
+error as the computed direction and ``A_i F_ij = A_j F_ji`` holds to rounding.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import quadrature
+from ._lambert import HAVE_NUMBA, _G_SIZE, _SRC_LANES, _source_block
+
+__all__ = ["reciprocal_pairs", "once_factors", "separated_factors", "MAX_ORDER"]
+
+MAX_ORDER = max(quadrature._APRIORI_ORDERS)
+# Receiver points per task of the kernel: enough lanes for the one-source loops, few enough that
+# the (3, n) rows stay in L2 and the tasks balance over the cores.
+_TASK_LANES = 4096
+
+
+def _gauss_tables() -> tuple[np.ndarray, np.ndarray]:
+    """Gauss-Legendre nodes and weights on [0, 1], row p for order p (1..MAX_ORDER)."""
+    nodes = np.zeros((MAX_ORDER + 1, MAX_ORDER))
+    weights = np.zeros((MAX_ORDER + 1, MAX_ORDER))
+    for p in range(1, MAX_ORDER + 1):
+        nodes[p, :p], weights[p, :p] = quadrature.gauss_legendre_01(p)
+    return nodes, weights
+
+
+def reciprocal_pairs(area: np.ndarray, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(receiver, source) of each unordered pair {i, j}: the smaller patch receives (i on ties)."""
+    swap = area[j] < area[i]
+    return np.where(swap, j, i), np.where(swap, i, j)
+
+
+def once_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, area: np.ndarray,
+                 rec: np.ndarray, src: np.ndarray, *, rtol: float, max_points: int, mode: str = "fill") -> np.ndarray:
+    """Unoccluded F(rec -> src), each pair to ``rtol``: :func:`radiosity.quadrature.pair_factors`'s
+    rules, its separated pairs by :func:`separated_factors`, the others (near, touching, crossing
+    the source's plane) by ``pair_factors`` itself."""
+    from .formfactors import _MODES
+
+    if not (1e-12 <= rtol < 1):
+        raise ValueError(f"rtol must be in [1e-12, 1), got {rtol}")
+    rec = np.asarray(rec, dtype=np.int64)
+    src = np.asarray(src, dtype=np.int64)
+    out = np.empty(len(rec))
+    if not len(rec):
+        return out
+    radius = quadrature._radius(quads, centroid)
+    crossing, order = quadrature._pair_setup(quads, normals, centroid, radius, centroid, normals, radius,
+                                             rec, src, rtol)
+    fast = (order > 0) & ~crossing & (order * order <= max_points) if HAVE_NUMBA else np.zeros(len(rec), bool)
+    sel = np.flatnonzero(fast)
+    out[sel] = separated_factors(quads, normals, centroid, area, rec[sel], src[sel], order[sel], _MODES[mode])
+    rest = np.flatnonzero(~fast)
+    if len(rest):
+        out[rest] = quadrature.pair_factors(quads, normals, centroid, area, rec[rest], src[rest], rtol=rtol,
+                                            max_points=max_points, mode=mode)
+    return out
+
+
+def separated_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, area: np.ndarray,
+                      rec: np.ndarray, src: np.ndarray, order: np.ndarray, mode: int) -> np.ndarray:
+    """F(rec -> src) by the receiver's order-p Gauss rule (the centroid for p = 1), p = ``order``.
+
+    The same rule as :func:`radiosity.quadrature.pair_factors` for its separated pairs
+    (``order`` from its a-priori bound), without its intermediate arrays.
+
+    Parameters
+    ----------
+    quads, normals, centroid, area : (n, 4, 3), (n, 3), (n, 3), (n,) float
+        Patches (receivers and sources), their unit normals, area centroids and areas.
+    rec, src : (m,) int
+        Receiver and source of each pair.
+    order : (m,) int
+        Gauss points per direction on the receiver, 1..MAX_ORDER.
+    mode : int
+        The Lambert kernel's mode (``formfactors._MODES``).
+
+    Returns
+    -------
+    (m,) float
+        F(rec -> src).
+    """
+    m = len(rec)
+    out = np.empty(m)
+    if not m:
+        return out
+    by_source = np.argsort(src, kind="stable")
+    rec_s, src_s = rec[by_source].astype(np.int64), src[by_source].astype(np.int64)
+    order_s = order[by_source].astype(np.int64)
+    starts = _task_starts(src_s, order_s, _TASK_LANES)
+    nodes, weights = _gauss_tables()
+    sorted_out = np.empty(m)
+    _separated_kernel(np.ascontiguousarray(quads, dtype=float), np.ascontiguousarray(normals, dtype=float),
+                      np.ascontiguousarray(centroid, dtype=float), np.ascontiguousarray(area, dtype=float),
+                      rec_s, src_s, order_s, starts, nodes, weights, mode, sorted_out)
+    out[by_source] = sorted_out
+    return out
+
+
+def _task_starts(src, order, lanes):
+    """Boundaries of tasks: runs of one source, cut after about ``lanes`` receiver points."""
+    starts = np.empty(len(src) + 1, np.int64)
+    count = 0
+    used = 0
+    for t in range(len(src)):
+        if t == 0 or src[t] != src[t - 1] or used >= lanes:
+            starts[count] = t
+            count += 1
+            used = 0
+        used += order[t] * order[t]
+    starts[count] = len(src)
+    return starts[:count + 1]
+
+
+def _put_points(quads, normals, centroid, area, r, p, nodes, weights, PT, NT, W, pos):
+    """Receiver r's order-p points (``split_patch_points``' map; p = 1: its centroid) into the
+    lanes pos.., with their area weights; returns the next free lane."""
+    if p == 1:
+        for d in range(3):
+            PT[d, pos] = centroid[r, d]
+            NT[d, pos] = normals[r, d]
+        W[pos] = area[r]
+        return pos + 1
+    a0, a1, a2 = quads[r, 0, 0], quads[r, 0, 1], quads[r, 0, 2]
+    ab0, ab1, ab2 = quads[r, 1, 0] - a0, quads[r, 1, 1] - a1, quads[r, 1, 2] - a2
+    ad0, ad1, ad2 = quads[r, 3, 0] - a0, quads[r, 3, 1] - a1, quads[r, 3, 2] - a2
+    tw0 = a0 - quads[r, 1, 0] + quads[r, 2, 0] - quads[r, 3, 0]
+    tw1 = a1 - quads[r, 1, 1] + quads[r, 2, 1] - quads[r, 3, 1]
+    tw2 = a2 - quads[r, 1, 2] + quads[r, 2, 2] - quads[r, 3, 2]
+    # dx/du x dx/dv = j0 + u ju + v jv (see quadrature._map_square)
+    j00, j01, j02 = ab1 * ad2 - ab2 * ad1, ab2 * ad0 - ab0 * ad2, ab0 * ad1 - ab1 * ad0
+    ju0, ju1, ju2 = ab1 * tw2 - ab2 * tw1, ab2 * tw0 - ab0 * tw2, ab0 * tw1 - ab1 * tw0
+    jv0, jv1, jv2 = tw1 * ad2 - tw2 * ad1, tw2 * ad0 - tw0 * ad2, tw0 * ad1 - tw1 * ad0
+    for a in range(p):
+        u, wu = nodes[p, a], weights[p, a]
+        for b in range(p):
+            v, wv = nodes[p, b], weights[p, b]
+            PT[0, pos] = a0 + u * ab0 + v * (ad0 + u * tw0)
+            PT[1, pos] = a1 + u * ab1 + v * (ad1 + u * tw1)
+            PT[2, pos] = a2 + u * ab2 + v * (ad2 + u * tw2)
+            for d in range(3):
+                NT[d, pos] = normals[r, d]
+            x0, x1, x2 = j00 + u * ju0 + v * jv0, j01 + u * ju1 + v * jv1, j02 + u * ju2 + v * jv2
+            W[pos] = wu * wv * np.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+            pos += 1
+    return pos
+
+
+def _separated_kernel(quads, normals, centroid, area, rec, src, order, starts, nodes, weights, mode, out):
+    """out[t] = F(rec[t] -> src[t]) for pairs sorted by source, one task per run in ``starts``."""
+    k = quads.shape[1]
+    for task in _prange(len(starts) - 1):
+        t0, t1 = starts[task], starts[task + 1]
+        n = 0
+        for t in range(t0, t1):
+            n += order[t] * order[t]
+        PT, NT = np.empty((3, n)), np.empty((3, n))
+        W, vals = np.empty(n), np.empty(n)
+        g = np.empty(_G_SIZE)
+        w, h, wc = np.empty((k, 3)), np.empty(k), np.empty((2 * k, 3))
+        pos = 0
+        for t in range(t0, t1):
+            pos = _put_points(quads, normals, centroid, area, rec[t], order[t], nodes, weights, PT, NT, W, pos)
+        for lo in range(0, n, _SRC_LANES):
+            _source_block(PT, NT, lo, min(_SRC_LANES, n - lo), quads, src[t0], mode, vals, g, w, h, wc)
+        pos = 0
+        for t in range(t0, t1):
+            acc, wsum = 0.0, 0.0
+            for q in range(pos, pos + order[t] * order[t]):
+                acc += W[q] * vals[q]
+                wsum += W[q]
+            pos += order[t] * order[t]
+            out[t] = acc / wsum if wsum > 0.0 else 0.0
+
+
+if HAVE_NUMBA:
+    import numba as _numba
+
+    _prange = _numba.prange
+    _task_starts = _numba.njit(cache=True)(_task_starts)
+    _put_points = _numba.njit(cache=True, inline="always", error_model="numpy")(_put_points)
+    _separated_kernel = _numba.njit(cache=True, parallel=True, error_model="numpy")(_separated_kernel)
+else:  # pragma: no cover
+    _prange = range
