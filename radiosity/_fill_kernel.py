@@ -23,12 +23,13 @@ import numpy as np
 from . import quadrature
 from ._lambert import HAVE_NUMBA, _G_SIZE, _SRC_LANES, _source_block
 
-__all__ = ["reciprocal_pairs", "once_factors", "separated_factors", "MAX_ORDER"]
+__all__ = ["block_pairs", "reciprocal_pairs", "rows_to_csr", "once_factors", "separated_factors", "MAX_ORDER"]
 
 MAX_ORDER = max(quadrature._APRIORI_ORDERS)
 # Receiver points per task of the kernel: enough lanes for the one-source loops, few enough that
 # the (3, n) rows stay in L2 and the tasks balance over the cores.
 _TASK_LANES = 4096
+_TINY = float(np.finfo(float).tiny)
 
 
 def _gauss_tables() -> tuple[np.ndarray, np.ndarray]:
@@ -41,13 +42,167 @@ def _gauss_tables() -> tuple[np.ndarray, np.ndarray]:
 
 
 def reciprocal_pairs(area: np.ndarray, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(receiver, source) of each unordered pair {i, j}: the smaller patch receives (i on ties)."""
-    swap = area[j] < area[i]
+    """(receiver, source) of each unordered pair {i, j}: the smaller patch receives (j on ties,
+    so that pairs listed by i come grouped by source)."""
+    swap = area[j] <= area[i]
     return np.where(swap, j, i), np.where(swap, i, j)
 
 
+def block_pairs(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, area: np.ndarray, rows: np.ndarray,
+                active: np.ndarray | None, rtol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The unordered pairs {i, j > i}, i in ``rows``, that face each other, oriented by
+    :func:`reciprocal_pairs`, with their a-priori Gauss order (0: refine adaptively).
+
+    One compiled pass for what ``assembly.candidate_pairs`` (then ``j > i``, both active) and
+    ``quadrature._pair_setup`` do: the same facing test and the same bound, with the bound's
+    powers replaced by the radius ratios where they are met (no ``pow`` per pair), and no
+    (rows, n) mask to scan.
+    """
+    n = len(quads)
+    rows = np.asarray(rows, dtype=np.int64)
+    live = np.ones(n, bool) if active is None else np.asarray(active, bool)
+    offset = np.einsum("nc,nc->n", normals, centroid)
+    radius = quadrature._radius(quads, centroid)
+    orders = np.array(quadrature._APRIORI_ORDERS, dtype=np.int64)
+    # the bound C rho^(-2p) <= rtol / SAFETY  <=>  rho >= (C SAFETY / rtol)^(1 / 2p)
+    need = (quadrature._APRIORI_C * quadrature._APRIORI_SAFETY / rtol) ** (1.0 / (2.0 * orders))
+    counts = np.zeros(len(rows) + 1, np.int64)
+    _count_pairs(quads, normals, offset, radius, rows, live, counts)
+    starts = np.cumsum(counts)
+    m = int(starts[-1])
+    rec, src, order = np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m, np.int64)
+    _list_pairs(quads, normals, centroid, area, offset, radius, rows, live, starts, orders, need, rec, src, order)
+    return rec, src, order
+
+
+def rows_to_csr(i: np.ndarray, j: np.ndarray, v: np.ndarray, n: int):
+    """``scipy.sparse.csr_matrix((v, (i, j)), shape=(n, n))`` for entries without duplicates, in
+    two compiled passes (a counting scatter by row, a sort of each row's columns) instead of
+    scipy's COO checks, conversion and canonicalisation (a quarter of the plates' fill).
+    The same matrix, bit for bit (canonical: sorted columns). None if (i, j) repeats, or if
+    the matrix would need 64-bit indices: the caller then asks scipy."""
+    import scipy.sparse as sp
+
+    if len(i) >= 2**31 - 1 or n >= 2**31 - 1:
+        return None
+    indptr = np.zeros(n + 1, np.int32)
+    indices = np.empty(len(i), np.int32)
+    data = np.empty(len(i))
+    _scatter_rows(np.asarray(i, np.int64), np.asarray(j, np.int64), np.asarray(v, float), indptr, indices, data)
+    if not _sort_rows(indptr, indices, data):
+        return None
+    F = sp.csr_matrix((data, indices, indptr), shape=(n, n))
+    F.has_sorted_indices = True
+    F.has_canonical_format = True
+    return F
+
+
+def _scatter_rows(i, j, v, indptr, indices, data):
+    """Entries grouped by row, in input order within a row (indptr counted here)."""
+    for t in range(len(i)):
+        indptr[i[t] + 1] += 1
+    for r in range(len(indptr) - 1):
+        indptr[r + 1] += indptr[r]
+    fill = indptr[:-1].copy()
+    for t in range(len(i)):
+        r = i[t]
+        indices[fill[r]], data[fill[r]] = j[t], v[t]
+        fill[r] += 1
+
+
+def _sort_rows(indptr, indices, data):
+    """Sort each row by column; False if a column repeats within a row."""
+    ok = np.ones(len(indptr) - 1, np.bool_)
+    for r in _prange(len(indptr) - 1):
+        lo, hi = indptr[r], indptr[r + 1]
+        cols = indices[lo:hi]
+        by_col = np.argsort(cols)
+        indices[lo:hi] = cols[by_col]
+        data[lo:hi] = data[lo:hi][by_col]
+        for t in range(lo + 1, hi):
+            if indices[t] == indices[t - 1]:
+                ok[r] = False
+    return ok.all()
+
+
+def _in_front(quads, j, normals, offset, i, tol):
+    """Whether a vertex of patch j lies more than ``tol`` in front of patch i's plane (the test
+    of ``assembly._some_vertex_in_front``)."""
+    for v in range(quads.shape[1]):
+        h = normals[i, 0] * quads[j, v, 0] + normals[i, 1] * quads[j, v, 1] + normals[i, 2] * quads[j, v, 2]
+        if h - offset[i] > tol:
+            return True
+    return False
+
+
+def _facing(quads, normals, offset, radius, i, j):
+    tol = 1e-9 * (radius[i] + radius[j])
+    return _in_front(quads, j, normals, offset, i, tol) and _in_front(quads, i, normals, offset, j, tol)
+
+
+def _balanced(t, n):
+    """Row of task t: rows from both ends alternately, so that the prange's contiguous chunks
+    get equal shares of a triangle's pairs (row i has n - 1 - i partners)."""
+    return t // 2 if t % 2 == 0 else n - 1 - t // 2
+
+
+def _count_pairs(quads, normals, offset, radius, rows, live, counts):
+    """counts[r + 1] = pairs {rows[r], j > rows[r]} that are both live and face each other."""
+    for t in _prange(len(rows)):
+        r = _balanced(t, len(rows))
+        i = rows[r]
+        c = 0
+        if live[i]:
+            for j in range(i + 1, len(quads)):
+                if live[j] and _facing(quads, normals, offset, radius, i, j):
+                    c += 1
+        counts[r + 1] = c
+
+
+def _list_pairs(quads, normals, centroid, area, offset, radius, rows, live, starts, orders, need, rec, src, order):
+    """The pairs :func:`_count_pairs` counted, oriented, with ``quadrature._pair_setup_loop``'s
+    order (0 for receivers crossing the source's plane or rho <= 1.5)."""
+    for s in _prange(len(rows)):
+        r = _balanced(s, len(rows))
+        i = rows[r]
+        t = starts[r]
+        if not live[i]:
+            continue
+        for j in range(i + 1, len(quads)):
+            if not (live[j] and _facing(quads, normals, offset, radius, i, j)):
+                continue
+            a, b = (j, i) if area[j] <= area[i] else (i, j)
+            rec[t], src[t] = a, b
+            order[t] = _apriori_order(quads, normals, centroid, radius, a, b, orders, need)
+            t += 1
+
+
+def _apriori_order(quads, normals, centroid, radius, a, b, orders, need):
+    """``quadrature._pair_setup_loop`` for one pair (receiver a, source b): 0 or the order."""
+    d0, d1, d2 = centroid[b, 0] - centroid[a, 0], centroid[b, 1] - centroid[a, 1], centroid[b, 2] - centroid[a, 2]
+    dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    safe = max(dist, _TINY)
+    u0, u1, u2 = d0 / safe, d1 / safe, d2 / safe
+    cos_rec = abs(normals[a, 0] * u0 + normals[a, 1] * u1 + normals[a, 2] * u2)
+    cos_src = abs(normals[b, 0] * u0 + normals[b, 1] * u1 + normals[b, 2] * u2)
+    rho = (dist - radius[b]) / max(radius[a], _TINY) * min(cos_rec, cos_src)
+    h_lo, h_hi = np.inf, -np.inf
+    for k in range(quads.shape[1]):
+        h = ((quads[a, k, 0] - centroid[b, 0]) * normals[b, 0] + (quads[a, k, 1] - centroid[b, 1]) * normals[b, 1]
+             + (quads[a, k, 2] - centroid[b, 2]) * normals[b, 2])
+        h_lo, h_hi = min(h_lo, h), max(h_hi, h)
+    tol_h = 1e-12 * (radius[a] + radius[b])
+    if (h_hi > tol_h and h_lo < -tol_h) or not rho > 1.5:
+        return 0
+    for q in range(len(orders)):
+        if rho >= need[q]:
+            return orders[q]
+    return 0
+
+
 def once_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, area: np.ndarray,
-                 rec: np.ndarray, src: np.ndarray, *, rtol: float, max_points: int, mode: str = "fill") -> np.ndarray:
+                 rec: np.ndarray, src: np.ndarray, *, rtol: float, max_points: int, mode: str = "fill",
+                 order: np.ndarray | None = None) -> np.ndarray:
     """Unoccluded F(rec -> src), each pair to ``rtol``: :func:`radiosity.quadrature.pair_factors`'s
     rules, its separated pairs by :func:`separated_factors`, the others (near, touching, crossing
     the source's plane) by ``pair_factors`` itself."""
@@ -60,10 +215,14 @@ def once_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, a
     out = np.empty(len(rec))
     if not len(rec):
         return out
-    radius = quadrature._radius(quads, centroid)
-    crossing, order = quadrature._pair_setup(quads, normals, centroid, radius, centroid, normals, radius,
-                                             rec, src, rtol)
-    fast = (order > 0) & ~crossing & (order * order <= max_points) if HAVE_NUMBA else np.zeros(len(rec), bool)
+    if order is None:
+        radius = quadrature._radius(quads, centroid)
+        crossing, order = quadrature._pair_setup(quads, normals, centroid, radius, centroid, normals, radius,
+                                                 rec, src, rtol)
+        order = np.where(crossing, 0, order)
+    fast = (order > 0) & (order * order <= max_points) if HAVE_NUMBA else np.zeros(len(rec), bool)
+    if fast.all():  # no gathers for the common case of a scene of separated pairs
+        return separated_factors(quads, normals, centroid, area, rec, src, order, _MODES[mode])
     sel = np.flatnonzero(fast)
     out[sel] = separated_factors(quads, normals, centroid, area, rec[sel], src[sel], order[sel], _MODES[mode])
     rest = np.flatnonzero(~fast)
@@ -100,16 +259,21 @@ def separated_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarr
     out = np.empty(m)
     if not m:
         return out
-    by_source = np.argsort(src, kind="stable")
-    rec_s, src_s = rec[by_source].astype(np.int64), src[by_source].astype(np.int64)
-    order_s = order[by_source].astype(np.int64)
+    grouped = bool(np.all(src[1:] >= src[:-1]))  # the fill's pairs of equal areas come grouped by source
+    if grouped:
+        rec_s, src_s, order_s = (np.ascontiguousarray(x, dtype=np.int64) for x in (rec, src, order))
+    else:
+        by_source = np.argsort(src, kind="stable")
+        rec_s, src_s = rec[by_source].astype(np.int64), src[by_source].astype(np.int64)
+        order_s = order[by_source].astype(np.int64)
     starts = _task_starts(src_s, order_s, _TASK_LANES)
     nodes, weights = _gauss_tables()
-    sorted_out = np.empty(m)
+    sorted_out = out if grouped else np.empty(m)
     _separated_kernel(np.ascontiguousarray(quads, dtype=float), np.ascontiguousarray(normals, dtype=float),
                       np.ascontiguousarray(centroid, dtype=float), np.ascontiguousarray(area, dtype=float),
                       rec_s, src_s, order_s, starts, nodes, weights, mode, sorted_out)
-    out[by_source] = sorted_out
+    if not grouped:
+        out[by_source] = sorted_out
     return out
 
 
@@ -194,6 +358,14 @@ if HAVE_NUMBA:
 
     _prange = _numba.prange
     _task_starts = _numba.njit(cache=True)(_task_starts)
+    _scatter_rows = _numba.njit(cache=True)(_scatter_rows)
+    _sort_rows = _numba.njit(cache=True, parallel=True)(_sort_rows)
+    _balanced = _numba.njit(cache=True, inline="always")(_balanced)
+    _in_front = _numba.njit(cache=True, inline="always")(_in_front)
+    _facing = _numba.njit(cache=True, inline="always")(_facing)
+    _apriori_order = _numba.njit(cache=True, error_model="numpy")(_apriori_order)
+    _count_pairs = _numba.njit(cache=True, parallel=True, error_model="numpy")(_count_pairs)
+    _list_pairs = _numba.njit(cache=True, parallel=True, error_model="numpy")(_list_pairs)
     _put_points = _numba.njit(cache=True, inline="always", error_model="numpy")(_put_points)
     _separated_kernel = _numba.njit(cache=True, parallel=True, error_model="numpy")(_separated_kernel)
 else:  # pragma: no cover

@@ -15,7 +15,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import _tol
-from ._fill_kernel import once_factors, reciprocal_pairs
+from ._fill_kernel import block_pairs, once_factors, reciprocal_pairs, rows_to_csr
 from .formfactors import lambert_pairs
 from .quadrature import pair_factors, patch_points
 
@@ -285,29 +285,34 @@ def fill_block(quads, normals, centroid, area, visibility, settings: FillSetting
     rows = np.arange(start, stop)
     if active is not None:
         rows = rows[active[rows]]
-    i, j = candidate_pairs(quads, normals, centroid, rows)
-    keep = j > i
-    if active is not None:
-        keep &= active[j]
-    if not keep.any():
+    # each unordered pair once, the smaller patch receiving; its mirror by reciprocity (below)
+    if _HAVE_NUMBA:
+        i, j, order = block_pairs(quads, normals, centroid, area, rows, active, settings.formfactor_rtol)
+    else:  # pragma: no cover
+        i, j = candidate_pairs(quads, normals, centroid, rows)
+        keep = (j > i) & (active[j] if active is not None else True)
+        (i, j), order = reciprocal_pairs(area, i[keep], j[keep]), None
+    if not len(i):
         empty = np.zeros(0, np.int64)
         return empty, empty, np.zeros(0), stats
-    # each unordered pair once, the smaller patch receiving; its mirror by reciprocity (below)
-    i, j = reciprocal_pairs(area, i[keep], j[keep])
     t0 = time.perf_counter()
     f = once_factors(quads, normals, centroid, area, i, j, rtol=settings.formfactor_rtol,
-                     max_points=_tol.PAIR_MAX_POINTS)
+                     max_points=_tol.PAIR_MAX_POINTS, order=order)
     t1 = time.perf_counter()
     stats.seconds_formfactors += t1 - t0
     if visibility is not None:
         _apply_visibility(f, quads, centroid, i, j, visibility, settings, stats)
+        for name in ("n_traced_pairs", "n_blocked_pairs", "n_exact_pairs"):  # the mirrors share the status
+            setattr(stats, name, 2 * getattr(stats, name))
         stats.seconds_visibility += time.perf_counter() - t1
         stats.n_rays = visibility.n_rays - rays_before
     ratio = np.divide(area[i], area[j], out=np.zeros(len(i)), where=area[j] > 0)  # A_j >= A_i
     i, j, f = np.concatenate([i, j]), np.concatenate([j, i]), np.concatenate([f, f * ratio])
     keep = f > _tol.DROP_FACTOR
-    stats.dropped_mass += float((f[~keep] * area[i[~keep]]).sum())
     stats.n_pairs += len(i)
+    if keep.all():
+        return i.astype(np.int64, copy=False), j.astype(np.int64, copy=False), f, stats
+    stats.dropped_mass += float((f[~keep] * area[i[~keep]]).sum())
     return i[keep].astype(np.int64, copy=False), j[keep].astype(np.int64, copy=False), f[keep], stats
 
 
@@ -349,4 +354,5 @@ def coo_parts_to_csr(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]], n: 
     else:
         i = j = np.zeros(0, np.int64)
         v = np.zeros(0)
-    return sp.csr_matrix((v, (i, j)), shape=(n, n))
+    fast = rows_to_csr(i, j, v, n) if _HAVE_NUMBA else None
+    return fast if fast is not None else sp.csr_matrix((v, (i, j)), shape=(n, n))
