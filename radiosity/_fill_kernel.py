@@ -23,7 +23,7 @@ import numpy as np
 from . import quadrature
 from ._lambert import HAVE_NUMBA, _G_SIZE, _SRC_LANES, _source_block
 
-__all__ = ["block_pairs", "reciprocal_pairs", "rows_to_csr", "once_factors", "separated_factors", "MAX_ORDER"]
+__all__ = ["block_pairs", "reciprocal_pairs", "rows_to_csr", "once_factors", "raw_ratio", "separated_factors", "MAX_ORDER"]
 
 MAX_ORDER = max(quadrature._APRIORI_ORDERS)
 # Receiver points per task of the kernel: enough lanes for the one-source loops, few enough that
@@ -222,9 +222,11 @@ def once_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, a
         order = np.where(crossing, 0, order)
     fast = (order > 0) & (order * order <= max_points) if HAVE_NUMBA else np.zeros(len(rec), bool)
     if fast.all():  # no gathers for the common case of a scene of separated pairs
-        return separated_factors(quads, normals, centroid, area, rec, src, order, _MODES[mode])
+        return separated_factors(quads, normals, centroid, area, rec, src, order, _MODES[mode],
+                                 raw_below=raw_ratio(rtol))
     sel = np.flatnonzero(fast)
-    out[sel] = separated_factors(quads, normals, centroid, area, rec[sel], src[sel], order[sel], _MODES[mode])
+    out[sel] = separated_factors(quads, normals, centroid, area, rec[sel], src[sel], order[sel], _MODES[mode],
+                                 raw_below=raw_ratio(rtol))
     rest = np.flatnonzero(~fast)
     if len(rest):
         out[rest] = quadrature.pair_factors(quads, normals, centroid, area, rec[rest], src[rest], rtol=rtol,
@@ -232,8 +234,20 @@ def once_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, a
     return out
 
 
+def raw_ratio(rtol: float) -> float:
+    """Largest distance/size at which Lambert's raw sum still meets ``rtol`` with room to spare.
+
+    The raw sum adds edge terms of size size/distance whose total is (size/distance)^2, so it
+    loses about distance/size of its digits: with four edges, each term good to 2 ulp, its
+    relative error stays below 8 u R at R = distance/size. The far form (exact to R = 1e6)
+    costs more per lane; the fill takes the raw sum where 8 u R <= rtol / 1000.
+    """
+    return rtol / (1000.0 * 8.0 * float(np.finfo(float).eps))
+
+
 def separated_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, area: np.ndarray,
-                      rec: np.ndarray, src: np.ndarray, order: np.ndarray, mode: int) -> np.ndarray:
+                      rec: np.ndarray, src: np.ndarray, order: np.ndarray, mode: int, *,
+                      raw_below: float = 0.0) -> np.ndarray:
     """F(rec -> src) by the receiver's order-p Gauss rule (the centroid for p = 1), p = ``order``.
 
     The same rule as :func:`radiosity.quadrature.pair_factors` for its separated pairs
@@ -249,6 +263,9 @@ def separated_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarr
         Gauss points per direction on the receiver, 1..MAX_ORDER.
     mode : int
         The Lambert kernel's mode (``formfactors._MODES``).
+    raw_below : float, default: 0
+        Runs whose pairs all have (centroid distance + receiver radius) / source radius at most
+        this take the raw sum (mode "raw": no far form), see :func:`raw_ratio`.
 
     Returns
     -------
@@ -271,7 +288,8 @@ def separated_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarr
     sorted_out = out if grouped else np.empty(m)
     _separated_kernel(np.ascontiguousarray(quads, dtype=float), np.ascontiguousarray(normals, dtype=float),
                       np.ascontiguousarray(centroid, dtype=float), np.ascontiguousarray(area, dtype=float),
-                      rec_s, src_s, order_s, starts, nodes, weights, mode, sorted_out)
+                      quadrature._radius(quads, centroid), rec_s, src_s, order_s, starts, nodes, weights, mode,
+                      float(raw_below), sorted_out)
     if not grouped:
         out[by_source] = sorted_out
     return out
@@ -326,14 +344,20 @@ def _put_points(quads, normals, centroid, area, r, p, nodes, weights, PT, NT, W,
     return pos
 
 
-def _separated_kernel(quads, normals, centroid, area, rec, src, order, starts, nodes, weights, mode, out):
+def _separated_kernel(quads, normals, centroid, area, radius, rec, src, order, starts, nodes, weights, mode,
+                      raw_below, out):
     """out[t] = F(rec[t] -> src[t]) for pairs sorted by source, one task per run in ``starts``."""
     k = quads.shape[1]
     for task in _prange(len(starts) - 1):
         t0, t1 = starts[task], starts[task + 1]
         n = 0
+        widest = 0.0  # the run's largest distance / source size: the raw sum's digit loss
         for t in range(t0, t1):
             n += order[t] * order[t]
+            a, b = rec[t], src[t]
+            d0, d1, d2 = centroid[b, 0] - centroid[a, 0], centroid[b, 1] - centroid[a, 1], centroid[b, 2] - centroid[a, 2]
+            widest = max(widest, (np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) + radius[a]) / max(radius[b], _TINY))
+        run_mode = 1 if widest <= raw_below else mode
         PT, NT = np.empty((3, n)), np.empty((3, n))
         W, vals = np.empty(n), np.empty(n)
         g = np.empty(_G_SIZE)
@@ -342,7 +366,7 @@ def _separated_kernel(quads, normals, centroid, area, rec, src, order, starts, n
         for t in range(t0, t1):
             pos = _put_points(quads, normals, centroid, area, rec[t], order[t], nodes, weights, PT, NT, W, pos)
         for lo in range(0, n, _SRC_LANES):
-            _source_block(PT, NT, lo, min(_SRC_LANES, n - lo), quads, src[t0], mode, vals, g, w, h, wc)
+            _source_block(PT, NT, lo, min(_SRC_LANES, n - lo), quads, src[t0], run_mode, vals, g, w, h, wc)
         pos = 0
         for t in range(t0, t1):
             acc, wsum = 0.0, 0.0

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from helpers import PARALLEL_SQUARES
 
 from radiosity import _tol
-from radiosity._fill_kernel import block_pairs, once_factors, reciprocal_pairs, rows_to_csr, separated_factors
+from radiosity._fill_kernel import block_pairs, once_factors, raw_ratio, reciprocal_pairs, rows_to_csr, separated_factors
 from radiosity.assembly import FillSettings, assemble, candidate_pairs
 from radiosity.formfactors import _MODES, polygon_normals
 from radiosity.quadrature import _pair_setup, _radius, centroids_and_areas, pair_factors
@@ -52,6 +52,25 @@ def test_separated_pairs_match_pair_factors(rtol):
     mine = separated_factors(quads, normals, centroid, area, i[sel], j[sel], order[sel], _MODES["fill"])
     ref = pair_factors(quads, normals, centroid, area, i[sel], j[sel], rtol=rtol, mode="fill")
     np.testing.assert_allclose(mine, ref, rtol=1e-13, atol=0)
+    # the raw sum where it keeps its digits (distance / size <= raw_ratio(rtol)): within 8 u R
+    raw = separated_factors(quads, normals, centroid, area, i[sel], j[sel], order[sel], _MODES["fill"],
+                            raw_below=raw_ratio(rtol))
+    np.testing.assert_allclose(raw, ref, rtol=1e-13, atol=0)
+
+
+def test_raw_sum_only_where_its_digit_loss_is_below_rtol():
+    """A 1e-5 source 1 away (distance / size 2.4e5) seen from a unit plate: at rtol 1e-10 the run
+    keeps the far form (raw_ratio 56), at 1e-3 it takes the raw sum, whose error 8 u R ~ 4e-10
+    is far below rtol."""
+    small = np.array([[[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]], float) * 1e-5 + [0.5, 0.5, 1.0]
+    quads = np.ascontiguousarray(np.concatenate([plates(1)[:1], small[:, ::-1]]))
+    normals, centroid, area = geometry(quads)
+    rec, src, order = np.array([0]), np.array([1]), np.array([6])
+    far = separated_factors(quads, normals, centroid, area, rec, src, order, _MODES["fill"])
+    tight = separated_factors(quads, normals, centroid, area, rec, src, order, _MODES["fill"], raw_below=raw_ratio(1e-10))
+    loose = separated_factors(quads, normals, centroid, area, rec, src, order, _MODES["fill"], raw_below=raw_ratio(1e-3))
+    assert tight[0] == far[0]
+    assert loose[0] != far[0] and abs(loose[0] / far[0] - 1) < 1e-8
 
 
 def test_block_pairs_are_candidate_pairs_oriented_with_the_same_orders():
