@@ -18,6 +18,8 @@ error as the computed direction and ``A_i F_ij = A_j F_ji`` holds to rounding.
 
 from __future__ import annotations
 
+import types
+
 import numpy as np
 
 from . import quadrature
@@ -377,20 +379,41 @@ def _separated_kernel(quads, normals, centroid, area, radius, rec, src, order, s
             out[t] = acc / wsum if wsum > 0.0 else 0.0
 
 
+# Below this many pairs (or entries) a pass runs on one thread: waking the thread pool costs more
+# than the pass on a busy machine (35 ms per parallel loop for the 8 x 8 plates' 4,096 pairs).
+PARALLEL_MIN = 50_000
+
+
+class _TwoWays:
+    """A compiled loop in a parallel and a serial build, picked per call by ``work(*args)``
+    (the pairs or entries it loops over)."""
+
+    def __init__(self, fn, work, **options):
+        self.parallel = _numba.njit(cache=True, parallel=True, **options)(fn)
+        # a copy under its own name: numba's cache files are named after the function, not its flags
+        serial = types.FunctionType(fn.__code__, fn.__globals__, fn.__name__ + "_serial", fn.__defaults__)
+        serial.__qualname__ = fn.__qualname__ + "_serial"
+        self.serial = _numba.njit(cache=True, **options)(serial)
+        self.work = work
+
+    def __call__(self, *args):
+        return (self.parallel if self.work(*args) >= PARALLEL_MIN else self.serial)(*args)
+
+
 if HAVE_NUMBA:
     import numba as _numba
 
     _prange = _numba.prange
     _task_starts = _numba.njit(cache=True)(_task_starts)
     _scatter_rows = _numba.njit(cache=True)(_scatter_rows)
-    _sort_rows = _numba.njit(cache=True, parallel=True)(_sort_rows)
+    _sort_rows = _TwoWays(_sort_rows, lambda indptr, indices, data: len(indices))
     _balanced = _numba.njit(cache=True, inline="always")(_balanced)
     _in_front = _numba.njit(cache=True, inline="always")(_in_front)
     _facing = _numba.njit(cache=True, inline="always")(_facing)
     _apriori_order = _numba.njit(cache=True, error_model="numpy")(_apriori_order)
-    _count_pairs = _numba.njit(cache=True, parallel=True, error_model="numpy")(_count_pairs)
-    _list_pairs = _numba.njit(cache=True, parallel=True, error_model="numpy")(_list_pairs)
+    _count_pairs = _TwoWays(_count_pairs, lambda quads, *a: len(a[3]) * len(quads) // 2, error_model="numpy")
+    _list_pairs = _TwoWays(_list_pairs, lambda *a: len(a[11]), error_model="numpy")
     _put_points = _numba.njit(cache=True, inline="always", error_model="numpy")(_put_points)
-    _separated_kernel = _numba.njit(cache=True, parallel=True, error_model="numpy")(_separated_kernel)
+    _separated_kernel = _TwoWays(_separated_kernel, lambda *a: len(a[5]), error_model="numpy")
 else:  # pragma: no cover
     _prange = range
