@@ -180,9 +180,10 @@ def test_fill_settings_validate():
 
 
 @pytest.mark.parametrize("mode", ["exact", "rays"])
-def test_fill_classifies_each_pair_once_for_both_directions(mode, monkeypatch):
-    """assemble classifies (i, j) and (j, i) together; every entry is still f_ij x fraction(i, j)
-    (rays) or f_ij - hidden(i, j) (exact shadows over shadow-aligned cells)."""
+def test_fill_computes_each_pair_once_and_mirrors_it(mode, monkeypatch):
+    """assemble computes each unordered pair once, the smaller patch receiving: that entry is
+    f_ij x fraction(i, j) (rays) or f_ij - hidden(i, j) (exact shadows over shadow-aligned
+    cells), and its mirror is A_i F_ij / A_j (reciprocity)."""
     from test_visibility import boxes_scene
 
     import radiosity.visibility._constants as constants
@@ -199,7 +200,10 @@ def test_fill_classifies_each_pair_once_for_both_directions(mode, monkeypatch):
     assert stats.n_traced_pairs > 0 and stats.n_blocked_pairs > 0
     from radiosity.methods.uniform.assembly import candidate_pairs, unoccluded_factors
 
+    from radiosity.methods.uniform._fill_kernel import reciprocal_pairs
+
     i, j = candidate_pairs(quads, normals, centroid, np.arange(len(quads)))
+    i, j = reciprocal_pairs(area, i[j > i], j[j > i])  # each pair once, the smaller patch receiving
 
     f = unoccluded_factors(quads, normals, centroid, area, i, j, settings)
     fresh = Visibility(quads, normals, groups, 1.8, samples=2, max_samples=4)
@@ -218,7 +222,9 @@ def test_fill_classifies_each_pair_once_for_both_directions(mode, monkeypatch):
     else:
         expected = f * fresh.fraction(i, j)
     np.testing.assert_allclose(F.toarray()[i, j], np.where(expected > 1e-12, expected, 0.0), rtol=1e-12, atol=1e-15)
-    assert F.nnz == np.count_nonzero(expected > 1e-12)
+    mirror = expected * area[i] / area[j]  # F(j -> i) by reciprocity
+    np.testing.assert_allclose(F.toarray()[j, i], np.where(mirror > 1e-12, mirror, 0.0), rtol=1e-12, atol=1e-15)
+    assert F.nnz == np.count_nonzero(expected > 1e-12) + np.count_nonzero(mirror > 1e-12)
 
 
 def test_inactive_patches_are_left_out_and_nothing_else_changes():

@@ -19,6 +19,7 @@ from ... import _tol
 from ..._memory import FILL_PAIRS
 from ...options import Options
 from ...formfactors import pair_factors
+from ._fill_kernel import block_pairs, once_factors, rows_to_csr
 
 __all__ = ["FillSettings", "FillStats", "candidate_pairs", "unoccluded_factors", "fill_block", "assemble"]
 
@@ -231,6 +232,10 @@ def fill_block(quads, normals, centroid, area, visibility, settings: FillSetting
                active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, FillStats]:
     """One block of the fill: the pairs (i, j > i) with i in rows ``start:stop``, and their mirrors.
 
+    Each unordered pair is integrated once, over its smaller patch (form factor and visibility),
+    and mirrored by reciprocity, ``F(j -> i) = A_i F(i -> j) / A_j`` (see
+    :mod:`radiosity.methods.uniform._fill_kernel`).
+
     The unit of work of :func:`assemble`, of the Dask tasks (:mod:`radiosity.methods.uniform.cluster`) and of
     the out-of-core writer (:mod:`radiosity.methods.uniform.shards`): a block's result depends only on the
     geometry, the settings and its rows, so however blocks are scheduled, F is the same bit for bit.
@@ -249,26 +254,29 @@ def fill_block(quads, normals, centroid, area, visibility, settings: FillSetting
     rows = np.arange(start, stop)
     if active is not None:
         rows = rows[active[rows]]
-    i, j = candidate_pairs(quads, normals, centroid, rows)
-    keep = j > i
-    if active is not None:
-        keep &= active[j]
-    half = int(keep.sum())
-    i, j = np.concatenate([i[keep], j[keep]]), np.concatenate([j[keep], i[keep]])
+    # each unordered pair once, the smaller patch receiving; its mirror by reciprocity (below)
+    i, j, order = block_pairs(quads, normals, centroid, area, rows, active, settings.formfactor_rtol)
     if not len(i):
         empty = np.zeros(0, np.int64)
         return empty, empty, np.zeros(0), stats
     t0 = time.perf_counter()
-    f = unoccluded_factors(quads, normals, centroid, area, i, j, settings)
+    f = once_factors(quads, normals, centroid, area, i, j, rtol=settings.formfactor_rtol,
+                     max_points=_tol.PAIR_MAX_POINTS, order=order)
     t1 = time.perf_counter()
     stats.seconds_formfactors += t1 - t0
     if visibility is not None:
-        _apply_visibility(f, quads, centroid, i, j, visibility, settings, stats, half=half)
+        _apply_visibility(f, quads, centroid, i, j, visibility, settings, stats)
+        for name in ("n_traced_pairs", "n_blocked_pairs", "n_exact_pairs"):  # the mirrors share the status
+            setattr(stats, name, 2 * getattr(stats, name))
         stats.seconds_visibility += time.perf_counter() - t1
         stats.n_rays = visibility.n_rays - rays_before
+    ratio = np.divide(area[i], area[j], out=np.zeros(len(i)), where=area[j] > 0)  # A_j >= A_i
+    i, j, f = np.concatenate([i, j]), np.concatenate([j, i]), np.concatenate([f, f * ratio])
     keep = f > _tol.DROP_FACTOR
-    stats.dropped_mass += float((f[~keep] * area[i[~keep]]).sum())
     stats.n_pairs += len(i)
+    if keep.all():
+        return i.astype(np.int64, copy=False), j.astype(np.int64, copy=False), f, stats
+    stats.dropped_mass += float((f[~keep] * area[i[~keep]]).sum())
     return i[keep].astype(np.int64, copy=False), j[keep].astype(np.int64, copy=False), f[keep], stats
 
 
@@ -310,4 +318,5 @@ def coo_parts_to_csr(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]], n: 
     else:
         i = j = np.zeros(0, np.int64)
         v = np.zeros(0)
-    return sp.csr_matrix((v, (i, j)), shape=(n, n))
+    fast = rows_to_csr(i, j, v, n)
+    return fast if fast is not None else sp.csr_matrix((v, (i, j)), shape=(n, n))

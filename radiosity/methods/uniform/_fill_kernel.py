@@ -1,0 +1,416 @@
+"""The fill's separated pairs in one compiled pass, each unordered pair once (reciprocity).
+
+:func:`radiosity.quadrature.pair_factors` serves any pair, and for a well separated pair (its
+a-priori Gauss order p > 0) it costs a sequence of numpy passes around the Lambert kernel: unique
+receivers, their Gauss points and repeated normals as arrays, a sort by source, gathers. On the
+plates of issue 15 (1,048,576 pairs, all separated) those passes and the kernel's gathers took
+about two thirds of the fill. :func:`separated_factors` does the same arithmetic (the receiver's
+order-p Gauss points of :func:`radiosity.quadrature.split_patch_points`, or its centroid for
+p = 1, and Lambert's closed form in the one-source lane loops) in one parallel loop over runs of
+pairs sharing a source: each run writes its receivers' points straight into the lanes.
+
+:func:`reciprocal_pairs` orients each unordered pair so that the smaller patch receives (its
+integral is the cheaper and the better conditioned: rho in the a-priori bound grows as the
+receiver shrinks), and the fill mirrors it, F(j -> i) = A_i F(i -> j) / A_j: reciprocity holds
+for the exact factors of flat patches, one-sided or clipped, so the mirror has the same relative
+error as the computed direction and ``A_i F_ij = A_j F_ji`` holds to rounding.
+"""
+
+from __future__ import annotations
+
+import types
+
+import numba as _numba
+import numpy as np
+
+from ...formfactors import _quadrature as quadrature
+from ...formfactors._lambert import _G_SIZE, _SRC_LANES, _source_block
+
+__all__ = ["block_pairs", "reciprocal_pairs", "rows_to_csr", "once_factors", "raw_ratio", "separated_factors", "MAX_ORDER"]
+
+_prange = _numba.prange  # the loops below are compiled with parallel=True (see _TwoWays)
+MAX_ORDER = max(quadrature._APRIORI_ORDERS)
+# Receiver points per task of the kernel: enough lanes for the one-source loops, few enough that
+# the (3, n) rows stay in L2 and the tasks balance over the cores.
+_TASK_LANES = 4096
+_TINY = float(np.finfo(float).tiny)
+
+
+def _gauss_tables() -> tuple[np.ndarray, np.ndarray]:
+    """Gauss-Legendre nodes and weights on [0, 1], row p for order p (1..MAX_ORDER)."""
+    nodes = np.zeros((MAX_ORDER + 1, MAX_ORDER))
+    weights = np.zeros((MAX_ORDER + 1, MAX_ORDER))
+    for p in range(1, MAX_ORDER + 1):
+        nodes[p, :p], weights[p, :p] = quadrature.gauss_legendre_01(p)
+    return nodes, weights
+
+
+def reciprocal_pairs(area: np.ndarray, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(receiver, source) of each unordered pair {i, j}: the smaller patch receives (j on ties,
+    so that pairs listed by i come grouped by source)."""
+    swap = area[j] <= area[i]
+    return np.where(swap, j, i), np.where(swap, i, j)
+
+
+def block_pairs(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, area: np.ndarray, rows: np.ndarray,
+                active: np.ndarray | None, rtol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The unordered pairs {i, j > i}, i in ``rows``, that face each other, oriented by
+    :func:`reciprocal_pairs`, with their a-priori Gauss order (0: refine adaptively).
+
+    One compiled pass for what ``assembly.candidate_pairs`` (then ``j > i``, both active) and
+    ``quadrature._pair_setup`` do: the same facing test and the same bound, with the bound's
+    powers replaced by the radius ratios where they are met (no ``pow`` per pair), and no
+    (rows, n) mask to scan.
+    """
+    n = len(quads)
+    rows = np.asarray(rows, dtype=np.int64)
+    live = np.ones(n, bool) if active is None else np.asarray(active, bool)
+    offset = np.einsum("nc,nc->n", normals, centroid)
+    radius = quadrature._radius(quads, centroid)
+    orders = np.array(quadrature._APRIORI_ORDERS, dtype=np.int64)
+    # the bound C rho^(-2p) <= rtol / SAFETY  <=>  rho >= (C SAFETY / rtol)^(1 / 2p)
+    need = (quadrature._APRIORI_C * quadrature._APRIORI_SAFETY / rtol) ** (1.0 / (2.0 * orders))
+    counts = np.zeros(len(rows) + 1, np.int64)
+    _count_pairs(quads, normals, offset, radius, rows, live, counts)
+    starts = np.cumsum(counts)
+    m = int(starts[-1])
+    rec, src, order = np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m, np.int64)
+    _list_pairs(quads, normals, centroid, area, offset, radius, rows, live, starts, orders, need, rec, src, order)
+    return rec, src, order
+
+
+def rows_to_csr(i: np.ndarray, j: np.ndarray, v: np.ndarray, n: int):
+    """``scipy.sparse.csr_matrix((v, (i, j)), shape=(n, n))`` for entries without duplicates, in
+    two compiled passes (a counting scatter by row, a sort of each row's columns) instead of
+    scipy's COO checks, conversion and canonicalisation (a quarter of the plates' fill).
+    The same matrix, bit for bit (canonical: sorted columns). None if (i, j) repeats, or if
+    the matrix would need 64-bit indices: the caller then asks scipy."""
+    import scipy.sparse as sp
+
+    if len(i) >= 2**31 - 1 or n >= 2**31 - 1:
+        return None
+    indptr = np.zeros(n + 1, np.int32)
+    indices = np.empty(len(i), np.int32)
+    data = np.empty(len(i))
+    _scatter_rows(np.asarray(i, np.int64), np.asarray(j, np.int64), np.asarray(v, float), indptr, indices, data)
+    if not _sort_rows(indptr, indices, data):
+        return None
+    F = sp.csr_matrix((data, indices, indptr), shape=(n, n))
+    F.has_sorted_indices = True
+    F.has_canonical_format = True
+    return F
+
+
+def _scatter_rows(i, j, v, indptr, indices, data):
+    """Entries grouped by row, in input order within a row (indptr counted here)."""
+    for t in range(len(i)):
+        indptr[i[t] + 1] += 1
+    for r in range(len(indptr) - 1):
+        indptr[r + 1] += indptr[r]
+    fill = indptr[:-1].copy()
+    for t in range(len(i)):
+        r = i[t]
+        indices[fill[r]], data[fill[r]] = j[t], v[t]
+        fill[r] += 1
+
+
+def _sort_rows(indptr, indices, data):
+    """Sort each row by column; False if a column repeats within a row."""
+    ok = np.ones(len(indptr) - 1, np.bool_)
+    for r in _prange(len(indptr) - 1):
+        lo, hi = indptr[r], indptr[r + 1]
+        cols = indices[lo:hi]
+        by_col = np.argsort(cols)
+        indices[lo:hi] = cols[by_col]
+        data[lo:hi] = data[lo:hi][by_col]
+        for t in range(lo + 1, hi):
+            if indices[t] == indices[t - 1]:
+                ok[r] = False
+    return ok.all()
+
+
+def _in_front(quads, j, normals, offset, i, tol):
+    """Whether a vertex of patch j lies more than ``tol`` in front of patch i's plane (the test
+    of ``assembly._some_vertex_in_front``)."""
+    for v in range(quads.shape[1]):
+        h = normals[i, 0] * quads[j, v, 0] + normals[i, 1] * quads[j, v, 1] + normals[i, 2] * quads[j, v, 2]
+        if h - offset[i] > tol:
+            return True
+    return False
+
+
+def _facing(quads, normals, offset, radius, i, j):
+    tol = 1e-9 * (radius[i] + radius[j])
+    return _in_front(quads, j, normals, offset, i, tol) and _in_front(quads, i, normals, offset, j, tol)
+
+
+def _balanced(t, n):
+    """Row of task t: rows from both ends alternately, so that the prange's contiguous chunks
+    get equal shares of a triangle's pairs (row i has n - 1 - i partners)."""
+    return t // 2 if t % 2 == 0 else n - 1 - t // 2
+
+
+def _count_pairs(quads, normals, offset, radius, rows, live, counts):
+    """counts[r + 1] = pairs {rows[r], j > rows[r]} that are both live and face each other."""
+    for t in _prange(len(rows)):
+        r = _balanced(t, len(rows))
+        i = rows[r]
+        c = 0
+        if live[i]:
+            for j in range(i + 1, len(quads)):
+                if live[j] and _facing(quads, normals, offset, radius, i, j):
+                    c += 1
+        counts[r + 1] = c
+
+
+def _list_pairs(quads, normals, centroid, area, offset, radius, rows, live, starts, orders, need, rec, src, order):
+    """The pairs :func:`_count_pairs` counted, oriented, with ``quadrature._pair_setup_loop``'s
+    order (0 for receivers crossing the source's plane or rho <= 1.5)."""
+    for s in _prange(len(rows)):
+        r = _balanced(s, len(rows))
+        i = rows[r]
+        t = starts[r]
+        if not live[i]:
+            continue
+        for j in range(i + 1, len(quads)):
+            if not (live[j] and _facing(quads, normals, offset, radius, i, j)):
+                continue
+            a, b = (j, i) if area[j] <= area[i] else (i, j)
+            rec[t], src[t] = a, b
+            order[t] = _apriori_order(quads, normals, centroid, radius, a, b, orders, need)
+            t += 1
+
+
+def _apriori_order(quads, normals, centroid, radius, a, b, orders, need):
+    """``quadrature._pair_setup_loop`` for one pair (receiver a, source b): 0 or the order."""
+    d0, d1, d2 = centroid[b, 0] - centroid[a, 0], centroid[b, 1] - centroid[a, 1], centroid[b, 2] - centroid[a, 2]
+    dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    safe = max(dist, _TINY)
+    u0, u1, u2 = d0 / safe, d1 / safe, d2 / safe
+    cos_rec = abs(normals[a, 0] * u0 + normals[a, 1] * u1 + normals[a, 2] * u2)
+    cos_src = abs(normals[b, 0] * u0 + normals[b, 1] * u1 + normals[b, 2] * u2)
+    rho = (dist - radius[b]) / max(radius[a], _TINY) * min(cos_rec, cos_src)
+    h_lo, h_hi = np.inf, -np.inf
+    for k in range(quads.shape[1]):
+        h = ((quads[a, k, 0] - centroid[b, 0]) * normals[b, 0] + (quads[a, k, 1] - centroid[b, 1]) * normals[b, 1]
+             + (quads[a, k, 2] - centroid[b, 2]) * normals[b, 2])
+        h_lo, h_hi = min(h_lo, h), max(h_hi, h)
+    tol_h = 1e-12 * (radius[a] + radius[b])
+    if (h_hi > tol_h and h_lo < -tol_h) or not rho > 1.5:
+        return 0
+    for q in range(len(orders)):
+        if rho >= need[q]:
+            return orders[q]
+    return 0
+
+
+def once_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, area: np.ndarray,
+                 rec: np.ndarray, src: np.ndarray, *, rtol: float, max_points: int, mode: str = "fill",
+                 order: np.ndarray | None = None) -> np.ndarray:
+    """Unoccluded F(rec -> src), each pair to ``rtol``: :func:`radiosity.quadrature.pair_factors`'s
+    rules, its separated pairs by :func:`separated_factors`, the others (near, touching, crossing
+    the source's plane) by ``pair_factors`` itself."""
+    from ...formfactors._closed_form import _MODES
+
+    if not (1e-12 <= rtol < 1):
+        raise ValueError(f"rtol must be in [1e-12, 1), got {rtol}")
+    rec = np.asarray(rec, dtype=np.int64)
+    src = np.asarray(src, dtype=np.int64)
+    out = np.empty(len(rec))
+    if not len(rec):
+        return out
+    if order is None:
+        radius = quadrature._radius(quads, centroid)
+        crossing, order = quadrature._pair_setup(quads, normals, centroid, radius, centroid, normals, radius,
+                                                 rec, src, rtol)
+        order = np.where(crossing, 0, order)
+    fast = (order > 0) & (order * order <= max_points)
+    if fast.all():  # no gathers for the common case of a scene of separated pairs
+        return separated_factors(quads, normals, centroid, area, rec, src, order, _MODES[mode],
+                                 raw_below=raw_ratio(rtol))
+    sel = np.flatnonzero(fast)
+    out[sel] = separated_factors(quads, normals, centroid, area, rec[sel], src[sel], order[sel], _MODES[mode],
+                                 raw_below=raw_ratio(rtol))
+    rest = np.flatnonzero(~fast)
+    if len(rest):
+        out[rest] = quadrature.pair_factors(quads, normals, centroid, area, rec[rest], src[rest], rtol=rtol,
+                                            max_points=max_points, mode=mode)
+    return out
+
+
+def raw_ratio(rtol: float) -> float:
+    """Largest distance/size at which Lambert's raw sum still meets ``rtol`` with room to spare.
+
+    The raw sum adds edge terms of size size/distance whose total is (size/distance)^2, so it
+    loses about distance/size of its digits: with four edges, each term good to 2 ulp, its
+    relative error stays below 8 u R at R = distance/size. The far form (exact to R = 1e6)
+    costs more per lane; the fill takes the raw sum where 8 u R <= rtol / 1000.
+    """
+    return rtol / (1000.0 * 8.0 * float(np.finfo(float).eps))
+
+
+def separated_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, area: np.ndarray,
+                      rec: np.ndarray, src: np.ndarray, order: np.ndarray, mode: int, *,
+                      raw_below: float = 0.0) -> np.ndarray:
+    """F(rec -> src) by the receiver's order-p Gauss rule (the centroid for p = 1), p = ``order``.
+
+    The same rule as :func:`radiosity.quadrature.pair_factors` for its separated pairs
+    (``order`` from its a-priori bound), without its intermediate arrays.
+
+    Parameters
+    ----------
+    quads, normals, centroid, area : (n, 4, 3), (n, 3), (n, 3), (n,) float
+        Patches (receivers and sources), their unit normals, area centroids and areas.
+    rec, src : (m,) int
+        Receiver and source of each pair.
+    order : (m,) int
+        Gauss points per direction on the receiver, 1..MAX_ORDER.
+    mode : int
+        The Lambert kernel's mode (``formfactors._MODES``).
+    raw_below : float, default: 0
+        Runs whose pairs all have (centroid distance + receiver radius) / source radius at most
+        this take the raw sum (mode "raw": no far form), see :func:`raw_ratio`.
+
+    Returns
+    -------
+    (m,) float
+        F(rec -> src).
+    """
+    m = len(rec)
+    out = np.empty(m)
+    if not m:
+        return out
+    grouped = bool(np.all(src[1:] >= src[:-1]))  # the fill's pairs of equal areas come grouped by source
+    if grouped:
+        rec_s, src_s, order_s = (np.ascontiguousarray(x, dtype=np.int64) for x in (rec, src, order))
+    else:
+        by_source = np.argsort(src, kind="stable")
+        rec_s, src_s = rec[by_source].astype(np.int64), src[by_source].astype(np.int64)
+        order_s = order[by_source].astype(np.int64)
+    starts = _task_starts(src_s, order_s, _TASK_LANES)
+    nodes, weights = _gauss_tables()
+    sorted_out = out if grouped else np.empty(m)
+    _separated_kernel(np.ascontiguousarray(quads, dtype=float), np.ascontiguousarray(normals, dtype=float),
+                      np.ascontiguousarray(centroid, dtype=float), np.ascontiguousarray(area, dtype=float),
+                      quadrature._radius(quads, centroid), rec_s, src_s, order_s, starts, nodes, weights, mode,
+                      float(raw_below), sorted_out)
+    if not grouped:
+        out[by_source] = sorted_out
+    return out
+
+
+def _task_starts(src, order, lanes):
+    """Boundaries of tasks: runs of one source, cut after about ``lanes`` receiver points."""
+    starts = np.empty(len(src) + 1, np.int64)
+    count = 0
+    used = 0
+    for t in range(len(src)):
+        if t == 0 or src[t] != src[t - 1] or used >= lanes:
+            starts[count] = t
+            count += 1
+            used = 0
+        used += order[t] * order[t]
+    starts[count] = len(src)
+    return starts[:count + 1]
+
+
+def _put_points(quads, normals, centroid, area, r, p, nodes, weights, PT, NT, W, pos):
+    """Receiver r's order-p points (``split_patch_points``' map; p = 1: its centroid) into the
+    lanes pos.., with their area weights; returns the next free lane."""
+    if p == 1:
+        for d in range(3):
+            PT[d, pos] = centroid[r, d]
+            NT[d, pos] = normals[r, d]
+        W[pos] = area[r]
+        return pos + 1
+    a0, a1, a2 = quads[r, 0, 0], quads[r, 0, 1], quads[r, 0, 2]
+    ab0, ab1, ab2 = quads[r, 1, 0] - a0, quads[r, 1, 1] - a1, quads[r, 1, 2] - a2
+    ad0, ad1, ad2 = quads[r, 3, 0] - a0, quads[r, 3, 1] - a1, quads[r, 3, 2] - a2
+    tw0 = a0 - quads[r, 1, 0] + quads[r, 2, 0] - quads[r, 3, 0]
+    tw1 = a1 - quads[r, 1, 1] + quads[r, 2, 1] - quads[r, 3, 1]
+    tw2 = a2 - quads[r, 1, 2] + quads[r, 2, 2] - quads[r, 3, 2]
+    # dx/du x dx/dv = j0 + u ju + v jv (see quadrature._map_square)
+    j00, j01, j02 = ab1 * ad2 - ab2 * ad1, ab2 * ad0 - ab0 * ad2, ab0 * ad1 - ab1 * ad0
+    ju0, ju1, ju2 = ab1 * tw2 - ab2 * tw1, ab2 * tw0 - ab0 * tw2, ab0 * tw1 - ab1 * tw0
+    jv0, jv1, jv2 = tw1 * ad2 - tw2 * ad1, tw2 * ad0 - tw0 * ad2, tw0 * ad1 - tw1 * ad0
+    for a in range(p):
+        u, wu = nodes[p, a], weights[p, a]
+        for b in range(p):
+            v, wv = nodes[p, b], weights[p, b]
+            PT[0, pos] = a0 + u * ab0 + v * (ad0 + u * tw0)
+            PT[1, pos] = a1 + u * ab1 + v * (ad1 + u * tw1)
+            PT[2, pos] = a2 + u * ab2 + v * (ad2 + u * tw2)
+            for d in range(3):
+                NT[d, pos] = normals[r, d]
+            x0, x1, x2 = j00 + u * ju0 + v * jv0, j01 + u * ju1 + v * jv1, j02 + u * ju2 + v * jv2
+            W[pos] = wu * wv * np.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+            pos += 1
+    return pos
+
+
+def _separated_kernel(quads, normals, centroid, area, radius, rec, src, order, starts, nodes, weights, mode,
+                      raw_below, out):
+    """out[t] = F(rec[t] -> src[t]) for pairs sorted by source, one task per run in ``starts``."""
+    k = quads.shape[1]
+    for task in _prange(len(starts) - 1):
+        t0, t1 = starts[task], starts[task + 1]
+        n = 0
+        widest = 0.0  # the run's largest distance / source size: the raw sum's digit loss
+        for t in range(t0, t1):
+            n += order[t] * order[t]
+            a, b = rec[t], src[t]
+            d0, d1, d2 = centroid[b, 0] - centroid[a, 0], centroid[b, 1] - centroid[a, 1], centroid[b, 2] - centroid[a, 2]
+            widest = max(widest, (np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) + radius[a]) / max(radius[b], _TINY))
+        run_mode = 1 if widest <= raw_below else mode
+        PT, NT = np.empty((3, n)), np.empty((3, n))
+        W, vals = np.empty(n), np.empty(n)
+        g = np.empty(_G_SIZE)
+        w, h, wc = np.empty((k, 3)), np.empty(k), np.empty((2 * k, 3))
+        pos = 0
+        for t in range(t0, t1):
+            pos = _put_points(quads, normals, centroid, area, rec[t], order[t], nodes, weights, PT, NT, W, pos)
+        for lo in range(0, n, _SRC_LANES):
+            _source_block(PT, NT, lo, min(_SRC_LANES, n - lo), quads, src[t0], run_mode, vals, g, w, h, wc)
+        pos = 0
+        for t in range(t0, t1):
+            acc, wsum = 0.0, 0.0
+            for q in range(pos, pos + order[t] * order[t]):
+                acc += W[q] * vals[q]
+                wsum += W[q]
+            pos += order[t] * order[t]
+            out[t] = acc / wsum if wsum > 0.0 else 0.0
+
+
+# Below this many pairs (or entries) a pass runs on one thread: waking the thread pool costs more
+# than the pass on a busy machine (35 ms per parallel loop for the 8 x 8 plates' 4,096 pairs).
+PARALLEL_MIN = 50_000
+
+
+class _TwoWays:
+    """A compiled loop in a parallel and a serial build, picked per call by ``work(*args)``
+    (the pairs or entries it loops over)."""
+
+    def __init__(self, fn, work, **options):
+        self.parallel = _numba.njit(cache=True, parallel=True, **options)(fn)
+        # a copy under its own name: numba's cache files are named after the function, not its flags
+        serial = types.FunctionType(fn.__code__, fn.__globals__, fn.__name__ + "_serial", fn.__defaults__)
+        serial.__qualname__ = fn.__qualname__ + "_serial"
+        self.serial = _numba.njit(cache=True, **options)(serial)
+        self.work = work
+
+    def __call__(self, *args):
+        return (self.parallel if self.work(*args) >= PARALLEL_MIN else self.serial)(*args)
+
+
+# The plain functions above are compiled here (the serial and parallel builds of _TwoWays).
+_task_starts = _numba.njit(cache=True)(_task_starts)
+_scatter_rows = _numba.njit(cache=True)(_scatter_rows)
+_sort_rows = _TwoWays(_sort_rows, lambda indptr, indices, data: len(indices))
+_balanced = _numba.njit(cache=True, inline="always")(_balanced)
+_in_front = _numba.njit(cache=True, inline="always")(_in_front)
+_facing = _numba.njit(cache=True, inline="always")(_facing)
+_apriori_order = _numba.njit(cache=True, error_model="numpy")(_apriori_order)
+_count_pairs = _TwoWays(_count_pairs, lambda quads, *a: len(a[3]) * len(quads) // 2, error_model="numpy")
+_list_pairs = _TwoWays(_list_pairs, lambda *a: len(a[11]), error_model="numpy")
+_put_points = _numba.njit(cache=True, inline="always", error_model="numpy")(_put_points)
+_separated_kernel = _TwoWays(_separated_kernel, lambda *a: len(a[5]), error_model="numpy")

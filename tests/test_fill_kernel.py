@@ -1,0 +1,137 @@
+"""The fill's one-pass pairs (radiosity.methods.uniform._fill_kernel): the same rule as pair_factors, each unordered
+pair once with its mirror by reciprocity, the same pair list as candidate_pairs, the same CSR."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from helpers import PARALLEL_SQUARES
+
+from radiosity import _tol
+from radiosity.methods.uniform._fill_kernel import block_pairs, once_factors, raw_ratio, reciprocal_pairs, rows_to_csr, separated_factors
+from radiosity.methods.uniform.assembly import FillSettings, assemble, candidate_pairs
+from radiosity.formfactors._closed_form import _MODES
+from radiosity.geometry import polygon_normals
+from radiosity.formfactors._quadrature import _pair_setup, _radius, centroids_and_areas, pair_factors
+
+
+def plates(n: int, *, tilt: float = 0.0, upper_n: int | None = None) -> np.ndarray:
+    """A unit plate at z = 0 cut n x n facing up, one at z = 1 cut upper_n x upper_n facing down
+    (its far edge raised by ``tilt``)."""
+    def grid(k, z, down):
+        h = 1.0 / k
+        a, b = np.meshgrid(np.arange(k) * h, np.arange(k) * h, indexing="ij")
+        a, b = a.ravel(), b.ravel()
+        sq = np.stack([np.c_[a, b], np.c_[a + h, b], np.c_[a + h, b + h], np.c_[a, b + h]], axis=1)
+        zz = np.full(sq.shape[:2] + (1,), z) + (tilt * sq[..., :1] if down else 0.0)
+        q = np.concatenate([sq, zz], axis=2)
+        return q[:, ::-1] if down else q
+
+    return np.ascontiguousarray(np.concatenate([grid(n, 0.0, False), grid(upper_n or n, 1.0, True)]))
+
+
+def geometry(quads):
+    normals = polygon_normals(quads)
+    centroid, area = centroids_and_areas(quads)
+    return normals, centroid, area
+
+
+@pytest.mark.parametrize("rtol", [1e-3, 1e-6])
+def test_separated_pairs_match_pair_factors(rtol):
+    """The fused kernel evaluates pair_factors' own rule: the same numbers to rounding."""
+    quads = plates(4, tilt=0.3, upper_n=3)
+    normals, centroid, area = geometry(quads)
+    i, j = candidate_pairs(quads, normals, centroid, np.arange(len(quads)))
+    radius = _radius(quads, centroid)
+    crossing, order = _pair_setup(quads, normals, centroid, radius, centroid, normals, radius, i, j, rtol)
+    sel = (order > 0) & ~crossing
+    assert sel.sum() > 50
+    mine = separated_factors(quads, normals, centroid, area, i[sel], j[sel], order[sel], _MODES["fill"])
+    ref = pair_factors(quads, normals, centroid, area, i[sel], j[sel], rtol=rtol, mode="fill")
+    np.testing.assert_allclose(mine, ref, rtol=1e-13, atol=0)
+    # the raw sum where it keeps its digits (distance / size <= raw_ratio(rtol)): within 8 u R
+    raw = separated_factors(quads, normals, centroid, area, i[sel], j[sel], order[sel], _MODES["fill"],
+                            raw_below=raw_ratio(rtol))
+    np.testing.assert_allclose(raw, ref, rtol=1e-13, atol=0)
+
+
+def test_raw_sum_only_where_its_digit_loss_is_below_rtol():
+    """A 1e-5 source 1 away (distance / size 2.4e5) seen from a unit plate: at rtol 1e-10 the run
+    keeps the far form (raw_ratio 56), at 1e-3 it takes the raw sum, whose error 8 u R ~ 4e-10
+    is far below rtol."""
+    small = np.array([[[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]], float) * 1e-5 + [0.5, 0.5, 1.0]
+    quads = np.ascontiguousarray(np.concatenate([plates(1)[:1], small[:, ::-1]]))
+    normals, centroid, area = geometry(quads)
+    rec, src, order = np.array([0]), np.array([1]), np.array([6])
+    far = separated_factors(quads, normals, centroid, area, rec, src, order, _MODES["fill"])
+    tight = separated_factors(quads, normals, centroid, area, rec, src, order, _MODES["fill"], raw_below=raw_ratio(1e-10))
+    loose = separated_factors(quads, normals, centroid, area, rec, src, order, _MODES["fill"], raw_below=raw_ratio(1e-3))
+    assert tight[0] == far[0]
+    assert loose[0] != far[0] and abs(loose[0] / far[0] - 1) < 1e-8
+
+
+def test_block_pairs_are_candidate_pairs_oriented_with_the_same_orders():
+    quads = plates(4, tilt=0.3, upper_n=3)
+    normals, centroid, area = geometry(quads)
+    rows = np.arange(len(quads))
+    active = np.ones(len(quads), bool)
+    active[5] = False
+    rec, src, order = block_pairs(quads, normals, centroid, area, rows, active, 1e-6)
+    i, j = candidate_pairs(quads, normals, centroid, rows)
+    keep = (j > i) & active[i] & active[j]
+    r2, s2 = reciprocal_pairs(area, i[keep], j[keep])
+    assert sorted(zip(rec, src)) == sorted(zip(r2, s2))
+    assert np.all(area[rec] <= area[src])
+    radius = _radius(quads, centroid)
+    crossing, ref = _pair_setup(quads, normals, centroid, radius, centroid, normals, radius, rec, src, 1e-6)
+    np.testing.assert_array_equal(order, np.where(crossing, 0, ref))
+
+
+def test_plates_total_reciprocity_and_mirror():
+    """Plates cut 6 and 4: each entry is computed once over the smaller patch, A_i F_ij = A_j F_ji
+    to rounding, and the total meets Howell C-11."""
+    quads = plates(6, upper_n=4)
+    normals, centroid, area = geometry(quads)
+    F, stats = assemble(quads, normals, centroid, area, None, FillSettings(formfactor_rtol=1e-6))
+    m = 36
+    AF = sp.diags(area) @ F
+    np.testing.assert_allclose(AF.toarray(), AF.T.toarray(), rtol=1e-14, atol=1e-18)
+    total = float(AF[:m, m:].sum())
+    assert total == pytest.approx(PARALLEL_SQUARES[1.0], abs=1e-8)
+    assert stats.n_pairs == 2 * 36 * 16
+    # the computed direction is the small patch's (upper n = 4 has the larger patches)
+    i, j = np.arange(3), np.full(3, m + 1)
+    np.testing.assert_allclose(F[i, j].A.ravel(), pair_factors(quads, normals, centroid, area, i, j, rtol=1e-6,
+                                                                mode="fill"), rtol=1e-12)
+
+
+def test_once_factors_near_pairs_go_to_pair_factors():
+    """Adjacent and touching patches (a folded strip) take pair_factors' adaptive rule."""
+    quads = plates(2, tilt=0.0)
+    quads[4:] = quads[:4][:, ::-1] @ np.array([[1, 0, 0], [0, 0, 1], [0, 1, 0]])  # a wall at y = 0
+    quads = np.ascontiguousarray(quads)
+    normals, centroid, area = geometry(quads)
+    i, j = candidate_pairs(quads, normals, centroid, np.arange(len(quads)))
+    got = once_factors(quads, normals, centroid, area, i, j, rtol=1e-8, max_points=_tol.PAIR_MAX_POINTS)
+    ref = pair_factors(quads, normals, centroid, area, i, j, rtol=1e-8, max_points=_tol.PAIR_MAX_POINTS, mode="fill")
+    np.testing.assert_allclose(got, ref, rtol=1e-13)
+
+
+@settings(max_examples=25, deadline=None)
+@given(n=st.integers(1, 40), density=st.floats(0.0, 1.0), seed=st.integers(0, 2**16))
+def test_rows_to_csr_is_scipys_matrix(n, density, seed):
+    rng = np.random.default_rng(seed)
+    dense = np.where(rng.random((n, n)) < density, rng.normal(size=(n, n)), 0.0)
+    i, j = np.nonzero(dense)
+    perm = rng.permutation(len(i))
+    i, j = i[perm].astype(np.int64), j[perm].astype(np.int64)
+    v = dense[i, j]
+    mine, ref = rows_to_csr(i, j, v, n), sp.csr_matrix((v, (i, j)), shape=(n, n))
+    for name in ("indptr", "indices", "data"):
+        np.testing.assert_array_equal(getattr(mine, name), getattr(ref, name))
+    if len(i):  # a repeated entry: scipy sums, the fast path declines
+        assert rows_to_csr(np.r_[i, i[:1]], np.r_[j, j[:1]], np.r_[v, v[:1]], n) is None
