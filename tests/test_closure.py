@@ -143,3 +143,18 @@ def test_closed_room_with_boxes_rows_close(preset, max_patch_size, atol):
     occluded pairs used to get one receiver point in exact mode (rows 0.994-1.008 at default)."""
     rows = _rows(preset, max_patch_size=max_patch_size)
     np.testing.assert_allclose(rows, 1.0, atol=atol)
+
+
+def test_cli_summary_prints_the_gaining_rows():
+    from radiosity.cli._solve import format_summary
+
+    summary = {"source": "room.obj", "patches": 2, "nonzeros": 2, "rays": 0, "cache_hit": False,
+               "timings_s": {"solve": 0.1}, "solver": {"method": "direct", "iterations": [1] * 3,
+                                                        "residual": [0.0] * 3, "fallback": []},
+               "energy_W": {"emitted": [2.0] * 3, "absorbed": [2.01] * 3, "escaped": [-0.01] * 3},
+               "emission": {"ke_read_as": "radiance"}, "emitter_rays": None, "objects": {"lid": [1.0] * 3},
+               "notes": [], "energy_gaining": [{"object": "lid", "patch": 1, "share": 1.001, "gain_W": [0.01] * 3}]}
+    text = format_summary(type("S", (), {"summary": lambda self: summary})(), 0.0)
+    assert "gaining    lid patch 1 (row 1.00100)" in text
+    summary["energy_W"]["escaped"] = [0.0] * 3
+    assert "gaining" not in format_summary(type("S", (), {"summary": lambda self: summary})(), 0.0)
