@@ -154,7 +154,7 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     timings["solve"] = time.perf_counter() - t0
     balance = energy_balance(F, cut.patch_area, cut.reflectance, cut.emission, radiosity)
     gaining = gaining_patches(F, cut.patch_area, radiosity, cut.patch_object, cut.objects)
-    note = gain_note(balance, gaining)
+    note = gain_note(balance, gaining, options.formfactor_rtol + options.visibility_rtol)
     if note is not None:  # rows above 1: say where, so the user can look
         warnings.warn(note, RadiosityWarning, stacklevel=2)
     return Solution(scene=cut, radiosity=radiosity, F=F, options=options, timings=timings,

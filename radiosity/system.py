@@ -224,13 +224,18 @@ def gaining_patches(F: sp.csr_matrix, area: np.ndarray, radiosity: np.ndarray, p
              "gain_W": [float(g) for g in gain[k]]} for k in idx]
 
 
-def gain_note(energy: dict[str, list[float]], gaining: list[dict]) -> str | None:
-    """A note naming the patches that gain, when "escaped" is negative beyond round-off; else None."""
+def gain_note(energy: dict[str, list[float]], gaining: list[dict], tol: float = ESCAPED_ROUND_OFF) -> str | None:
+    """A note naming the patches that gain, when "escaped" is below ``-tol`` x emitted; else None.
+
+    :func:`radiosity.solve` passes the fill's own tolerance (``formfactor_rtol +
+    visibility_rtol``): a closed cube at draft escapes -2.9e-7 of its power, which is the
+    quadrature's error, not news.
+    """
     emitted = np.asarray(energy["emitted"], float)
     escaped = np.asarray(energy["escaped"], float)
-    if not (escaped < -ESCAPED_ROUND_OFF * np.abs(emitted)).any() or not gaining:
+    if not (escaped < -max(tol, ESCAPED_ROUND_OFF) * np.abs(emitted)).any() or not gaining:
         return None
-    worst = ", ".join(f"{g['object']} patch {g['patch']} ({g['share']:.5f})" for g in gaining[:5])
+    worst = ", ".join(f"{g['object']} patch {g['patch']} (row sum 1{g['share'] - 1:+.1e})" for g in gaining[:5])
     share = float((-escaped / np.where(emitted > 0, emitted, 1.0)).max())
     return (f"energy balance: 'escaped' is negative ({share:.2e} of the emitted power): rows of F sum above 1, "
             f"most at {worst}; a finer preset or tighter formfactor_rtol / visibility_rtol reduces it")

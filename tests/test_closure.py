@@ -118,7 +118,8 @@ def test_gaining_rows_are_named():
     assert gaining[0]["share"] == pytest.approx(1.001)
     np.testing.assert_allclose(gaining[0]["gain_W"], 1e-3 * B[1])
     note = gain_note(balance, gaining)
-    assert "lid patch 1" in note and "escaped" in note
+    assert "lid patch 1 (row sum 1+1.0e-03)" in note and "escaped" in note
+    assert gain_note(balance, gaining, tol=1e-2) is None  # within the fill's tolerance: no note
 
 
 # ---------------------------------------------------------------- a closed room with boxes
@@ -155,6 +156,6 @@ def test_cli_summary_prints_the_gaining_rows():
                "emission": {"ke_read_as": "radiance"}, "emitter_rays": None, "objects": {"lid": [1.0] * 3},
                "notes": [], "energy_gaining": [{"object": "lid", "patch": 1, "share": 1.001, "gain_W": [0.01] * 3}]}
     text = format_summary(type("S", (), {"summary": lambda self: summary})(), 0.0)
-    assert "gaining    lid patch 1 (row 1.00100)" in text
+    assert "gaining    lid patch 1 (row sum 1+1.0e-03)" in text
     summary["energy_W"]["escaped"] = [0.0] * 3
     assert "gaining" not in format_summary(type("S", (), {"summary": lambda self: summary})(), 0.0)
