@@ -43,6 +43,8 @@ class Solution:
     energy: dict[str, list[float]] = field(default_factory=dict)
     cache_hit: bool = False
     view_factor_storage: dict[str, Any] = field(default_factory=lambda: {"where": "in memory"})
+    # patches whose share of power landing on fronts exceeds 1 (system.gaining_patches)
+    energy_gaining: list[dict] = field(default_factory=list)
     _sensors: Any = field(default=None, init=False, repr=False)
 
     @property
@@ -149,6 +151,7 @@ class Solution:
                        "residual": self.solver.residual,
                        "fallback": self.solver.fallback} if self.solver else None,
             "energy_W": self.energy,
+            "energy_gaining": self.energy_gaining,
             "emission": emission_reading(scene.emission_mode),
             "emitter_rays": scene.light_paths,
             "notes": list(scene.notes),

@@ -17,7 +17,7 @@ from .methods.uniform.cache import FormFactorCache
 from .options import PRESETS, Options
 from .scene import Scene
 from .solution import Solution
-from .methods.uniform.system import SolverReport, energy_balance, solve_system
+from .methods.uniform.system import SolverReport, energy_balance, gain_note, gaining_patches, solve_system
 from .visibility import Visibility
 
 __all__ = ["solve", "view_factors", "compute_view_factors", "write_view_factors", "prepare"]
@@ -164,8 +164,13 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     timings = dict(prepared.timings)
     timings["solve"] = time.perf_counter() - t0
     balance = energy_balance(F, cut.patch_area, cut.reflectance, cut.emission, radiosity)
+    gaining = gaining_patches(F, cut.patch_area, radiosity, cut.patch_object, cut.objects)
+    note = gain_note(balance, gaining, options.formfactor_rtol + options.visibility_rtol)
+    if note is not None:  # rows above 1: say where, so the user can look
+        warnings.warn(note, RadiosityWarning, stacklevel=2)
     return Solution(scene=cut, radiosity=radiosity, F=F, options=options, timings=timings,
-                    fill=prepared.stats, solver=report, energy=balance, cache_hit=prepared.cache_hit)
+                    fill=prepared.stats, solver=report, energy=balance, cache_hit=prepared.cache_hit,
+                    energy_gaining=gaining)
 
 
 def _solve_out_of_core(cut, options, refusal: MemoryBudgetError, timings: dict[str, float]):

@@ -27,6 +27,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+# numba's disk cache of this module's kernels holds the _exact_kernel helpers compiled in, and
+# is keyed on this file alone: a change there must touch this file too, or stale code runs.
 from ._exact_kernel import _classify_one, _lambert, _point_hidden
 
 # Event lines one pair may cut its receiver by, and the cells they may make.

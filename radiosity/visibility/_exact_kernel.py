@@ -88,6 +88,26 @@ def point_factors(x, nx, polys, counts):
     return out
 
 
+@njit(cache=True, inline="always")
+def _thinner_than(poly, n, tol):
+    """True if the planar polygon poly[:n] is no wider than tol (area <= tol x longest edge)."""
+    ax = 0.0
+    ay = 0.0
+    az = 0.0
+    longest = 0.0
+    for k in range(n):
+        k2 = k + 1 if k + 1 < n else 0
+        ax += poly[k, 1] * poly[k2, 2] - poly[k, 2] * poly[k2, 1]
+        ay += poly[k, 2] * poly[k2, 0] - poly[k, 0] * poly[k2, 2]
+        az += poly[k, 0] * poly[k2, 1] - poly[k, 1] * poly[k2, 0]
+        ex = poly[k2, 0] - poly[k, 0]
+        ey = poly[k2, 1] - poly[k, 1]
+        ez = poly[k2, 2] - poly[k, 2]
+        longest = max(longest, math.sqrt(ex * ex + ey * ey + ez * ez))
+    area = 0.5 * math.sqrt(ax * ax + ay * ay + az * az)
+    return area <= tol * longest
+
+
 @njit(cache=True)
 def _hidden_polygon(xr, src, ns, sn, occ, ms, on, tol, a, b, s1, s2):
     """Part of the source src[:ns] hidden from xr by the convex occluder occ[:ms], into s1.
@@ -126,7 +146,10 @@ def _hidden_polygon(xr, src, ns, sn, occ, ms, on, tol, a, b, s1, s2):
     off = -(px * cx + py * cy + pz * cz)
     n1 = _clip(occ, ms, a, px, py, pz, off)
     n2 = _clip(a, n1, b, -px, -py, -pz, dx - off)
-    if n2 < 3:
+    if n2 < 3 or _thinner_than(b, n2, tol):
+        # An occluder that only touches the slab (a cap sharing the receiver's edge, clipped
+        # at x's own depth) leaves a sliver of round-off width: its cone from x is flat, but
+        # the planes through x and its edges are arbitrary and can cut away the whole source.
         return 0
     ix = 0.0
     iy = 0.0

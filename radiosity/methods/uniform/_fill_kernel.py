@@ -1,11 +1,11 @@
 """The fill's separated pairs in one compiled pass, each unordered pair once (reciprocity).
 
-:func:`radiosity.quadrature.pair_factors` serves any pair, and for a well separated pair (its
+:func:`radiosity.formfactors._quadrature.pair_factors` serves any pair, and for a well separated pair (its
 a-priori Gauss order p > 0) it costs a sequence of numpy passes around the Lambert kernel: unique
 receivers, their Gauss points and repeated normals as arrays, a sort by source, gathers. On the
 plates of issue 15 (1,048,576 pairs, all separated) those passes and the kernel's gathers took
 about two thirds of the fill. :func:`separated_factors` does the same arithmetic (the receiver's
-order-p Gauss points of :func:`radiosity.quadrature.split_patch_points`, or its centroid for
+order-p Gauss points of :func:`radiosity.formfactors._quadrature.split_patch_points`, or its centroid for
 p = 1, and Lambert's closed form in the one-source lane loops) in one parallel loop over runs of
 pairs sharing a source: each run writes its receivers' points straight into the lanes.
 
@@ -207,7 +207,7 @@ def _apriori_order(quads, normals, centroid, radius, a, b, orders, need):
 def once_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, area: np.ndarray,
                  rec: np.ndarray, src: np.ndarray, *, rtol: float, max_points: int, mode: str = "fill",
                  order: np.ndarray | None = None) -> np.ndarray:
-    """Unoccluded F(rec -> src), each pair to ``rtol``: :func:`radiosity.quadrature.pair_factors`'s
+    """Unoccluded F(rec -> src), each pair to ``rtol``: :func:`radiosity.formfactors._quadrature.pair_factors`'s
     rules, its separated pairs by :func:`separated_factors`, the others (near, touching, crossing
     the source's plane) by ``pair_factors`` itself."""
     from ...formfactors._closed_form import _MODES
@@ -254,7 +254,7 @@ def separated_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarr
                       raw_below: float = 0.0) -> np.ndarray:
     """F(rec -> src) by the receiver's order-p Gauss rule (the centroid for p = 1), p = ``order``.
 
-    The same rule as :func:`radiosity.quadrature.pair_factors` for its separated pairs
+    The same rule as :func:`radiosity.formfactors._quadrature.pair_factors` for its separated pairs
     (``order`` from its a-priori bound), without its intermediate arrays.
 
     Parameters

@@ -2,7 +2,7 @@
 
 :func:`radiosity.solve` keeps F in memory when the fill's worst case fits the budget
 (:func:`radiosity._memory.check_fill`). When it does not, instead of refusing, it fills F out
-of core (:func:`radiosity.shards.write_shards`, blocks planned from the budget) into a temporary
+of core (:func:`radiosity.methods.uniform.shards.write_shards`, blocks planned from the budget) into a temporary
 shard folder and solves (I - rho F) B = E by an iterative method whose only use of F is the
 matrix-vector product, one pass over the shards each. The three RGB channels share every pass:
 the unknown is B (n, 3) as one vector of 3n, each channel scaled to unit norm so one relative
@@ -92,7 +92,7 @@ def solve_shards(F, rho: np.ndarray, emission: np.ndarray, *, method: str = "aut
     Raises
     ------
     RadiosityError
-        If a channel's residual ends above :func:`radiosity.system.accepted_residual`.
+        If a channel's residual ends above :func:`radiosity.methods.uniform.system.accepted_residual`.
     """
     if method not in OUT_OF_CORE_SOLVERS:
         raise ValueError(f"solver {method!r} needs F in memory; out of core: {', '.join(OUT_OF_CORE_SOLVERS)}")

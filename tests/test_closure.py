@@ -1,0 +1,161 @@
+"""Closed scenes stay closed (issue 12 item 4, issue 13 item 4).
+
+* An occluder that only touches a receiver's edge from behind its plane (the cap of a prism
+  seen by one of its walls) hides nothing: exact shadows used to clip it to a sliver of
+  round-off width whose edge planes cut the whole source away (concentric prisms: inner rows
+  0.548 instead of 1).
+* The energy balance names the patches whose rows sum above 1 (what makes "escaped" negative).
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import radiosity
+from radiosity.methods.uniform.system import energy_balance, gain_note, gaining_patches
+from helpers import write_obj
+from test_exchange import prism
+from test_visibility import make_vis
+
+RING = 12
+
+
+def _prism_wall_and_cap():
+    """Wall k of a 12-sided prism (r 0.5, height 4, facing out), its top cap triangle (facing
+    up, sharing the wall's top edge, behind the wall's plane) and the enclosing prism's wall
+    in front of it (r 1, from -0.4 to 4.4: it crosses the cap's plane)."""
+    inner = prism(0.5, 4.0, RING, inward=False)
+    outer = prism(1.0, 4.8, RING, inward=True, z0=-0.4)
+    k = 7
+    wall, cap, facing = inner[k], inner[2 * RING + k], outer[k]
+    pad = lambda p: np.vstack([p, p[-1:]]) if len(p) == 3 else p  # noqa: E731 - quads for Visibility
+    return np.array([pad(wall), pad(cap), pad(facing)])
+
+
+def test_cap_touching_the_receivers_edge_hides_nothing():
+    quads = _prism_wall_and_cap()
+    vis = make_vis(quads)
+    i, j = np.array([0, 2]), np.array([2, 0])
+    status, rows, occ = vis.classify(i, j)
+    assert (status == radiosity.visibility.MAYBE).all()  # the cap's plane cuts the source
+    for order in (1, 3, 8):
+        np.testing.assert_allclose(vis.exact_fraction(i, j, rows, occ, order), 1.0, atol=1e-12)
+    np.testing.assert_allclose(vis.ray_fraction(i, j, rows=rows, occ=occ), 1.0, atol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def concentric_prisms(tmp_path_factory):
+    objects = {"inner": prism(0.5, 4.0, RING, inward=False), "outer": prism(1.0, 4.8, RING, inward=True, z0=-0.4)}
+    with warnings.catch_warnings():  # no emitter: a note says so
+        warnings.simplefilter("ignore", radiosity.RadiosityWarning)
+        scene = radiosity.load_scene(write_obj(tmp_path_factory.mktemp("prisms") / "prisms.obj", objects))
+        return scene, radiosity.view_factors(scene, cache=False)
+
+
+def test_convex_body_inside_a_closed_prism_sees_all_of_it(concentric_prisms):
+    """A convex body's rows: nothing of it can be hidden from it but by itself (it sees only the
+    shell), so every inner row sums to 1 to the quadrature's accuracy (before: 0.548)."""
+    scene, F = concentric_prisms
+    rows = np.asarray(F.sum(axis=1)).ravel()
+    inner = scene.patch_object == scene.objects.index("inner")
+    np.testing.assert_allclose(rows[inner], 1.0, atol=1e-6)
+
+
+@pytest.mark.xfail(strict=True, reason="shell rows 1.0129 at most: pairs behind more than 4 occluders keep the "
+                   "receiver's fixed points (3 x 3), and a 4.8 m wall's shadow edge is smeared over them")
+def test_closed_prism_shell_rows_close(concentric_prisms):
+    scene, F = concentric_prisms
+    rows = np.asarray(F.sum(axis=1)).ravel()
+    np.testing.assert_allclose(rows, 1.0, atol=1e-6)
+
+
+def test_icosphere_shell_rows_close(tmp_path):
+    """From inside a closed convex shell nothing is occluded: F_ij = A_j / A to the quadrature."""
+    trimesh = pytest.importorskip("trimesh")
+    m = trimesh.creation.icosphere(subdivisions=0, radius=1.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", radiosity.RadiosityWarning)
+        scene = radiosity.load_scene(write_obj(tmp_path / "ico.obj", {"shell": [m.vertices[f[::-1]] for f in m.faces]}))
+        F = radiosity.view_factors(scene, cache=False).toarray()
+    np.testing.assert_allclose(F.sum(axis=1), 1.0, atol=1e-6)
+    area = scene.patch_area
+    np.testing.assert_allclose(area[:, None] * F, (area[:, None] * F).T, atol=1e-6 * area.max())
+
+
+# ---------------------------------------------------------------- the energy balance names gains
+def _two_patch_furnace(gain: float):
+    """Two facing patches of area 1 whose rows sum to 1 + gain (and reciprocal)."""
+    F = sp.csr_matrix(np.array([[0.0, 1.0 + gain], [1.0 + gain, 0.0]]))
+    area = np.ones(2)
+    rho = np.full((2, 3), 0.5)
+    emission = np.ones((2, 3))
+    B = np.full((2, 3), 1.0 / (1.0 - 0.5 * (1.0 + gain)))
+    return F, area, rho, emission, B
+
+
+def test_no_gain_no_note():
+    F, area, rho, e, B = _two_patch_furnace(0.0)
+    balance = energy_balance(F, area, rho, e, B)
+    assert min(balance["escaped"]) >= -1e-9 * max(balance["emitted"])
+    gaining = gaining_patches(F, area, B, np.array([0, 1]), ["floor", "lid"])
+    assert gaining == [] and gain_note(balance, gaining) is None
+
+
+def test_gaining_rows_are_named():
+    F, area, rho, e, B = _two_patch_furnace(1e-3)
+    F = F.tolil()
+    F[1, 0] = 1.0  # only patch 0's row gains
+    F = F.tocsr()
+    balance = energy_balance(F, area, rho, e, B)
+    assert max(balance["escaped"]) < 0
+    gaining = gaining_patches(F, area, B, np.array([0, 1]), ["floor", "lid"])
+    # column sums: what lands of patch 1's power is F[0, 1] A_0 = 1.001 A_1
+    assert [(g["object"], g["patch"]) for g in gaining] == [("lid", 1)]
+    assert gaining[0]["share"] == pytest.approx(1.001)
+    np.testing.assert_allclose(gaining[0]["gain_W"], 1e-3 * B[1])
+    note = gain_note(balance, gaining)
+    assert "lid patch 1 (row sum 1+1.0e-03)" in note and "escaped" in note
+    assert gain_note(balance, gaining, tol=1e-2) is None  # within the fill's tolerance: no note
+
+
+# ---------------------------------------------------------------- a closed room with boxes
+CORPUS_ROOM = __import__("pathlib").Path(__file__).parent / "data" / "corpus" / "closed_room_boxes.obj"
+
+
+def _rows(preset: str, **overrides) -> np.ndarray:
+    from radiosity.options import Options
+    from radiosity.solve import _inactive, prepare
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", radiosity.RadiosityWarning)
+        prepared = prepare(radiosity.load_scene(CORPUS_ROOM), Options.from_preset(preset, cache=False, **overrides))
+    active = ~_inactive(prepared.scene)
+    return np.asarray(prepared.F.sum(axis=1)).ravel()[active]
+
+
+@pytest.mark.parametrize("preset, max_patch_size, atol", [("draft", None, 1e-2), ("default", 0.4, 1e-3)])
+def test_closed_room_with_boxes_rows_close(preset, max_patch_size, atol):
+    """Boxes on the floor, against a wall (rotated) and floating, a lamp 0.5 mm under the ceiling.
+    The default preset's rules on a coarser cut (0.4 m, to keep the test short): far partly
+    occluded pairs used to get one receiver point in exact mode (rows 0.994-1.008 at default)."""
+    rows = _rows(preset, max_patch_size=max_patch_size)
+    np.testing.assert_allclose(rows, 1.0, atol=atol)
+
+
+def test_cli_summary_prints_the_gaining_rows():
+    from radiosity.cli._solve import format_summary
+
+    summary = {"source": "room.obj", "patches": 2, "nonzeros": 2, "rays": 0, "cache_hit": False,
+               "timings_s": {"solve": 0.1}, "solver": {"method": "direct", "iterations": [1] * 3,
+                                                        "residual": [0.0] * 3, "fallback": []},
+               "energy_W": {"emitted": [2.0] * 3, "absorbed": [2.01] * 3, "escaped": [-0.01] * 3},
+               "emission": {"ke_read_as": "radiance"}, "emitter_rays": None, "objects": {"lid": [1.0] * 3},
+               "notes": [], "energy_gaining": [{"object": "lid", "patch": 1, "share": 1.001, "gain_W": [0.01] * 3}]}
+    text = format_summary(type("S", (), {"summary": lambda self: summary})(), 0.0)
+    assert "gaining    lid patch 1 (row sum 1+1.0e-03)" in text
+    summary["energy_W"]["escaped"] = [0.0] * 3
+    assert "gaining" not in format_summary(type("S", (), {"summary": lambda self: summary})(), 0.0)
