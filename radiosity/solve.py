@@ -23,6 +23,9 @@ from .visibility import Visibility
 __all__ = ["solve", "view_factors", "compute_view_factors", "write_view_factors", "prepare"]
 
 
+METHODS = ("uniform", "hierarchical")
+
+
 @dataclass
 class Prepared:
     """A scene cut for solving and its view-factor matrix, with what it cost."""
@@ -129,6 +132,8 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     **overrides
         Any field of :class:`radiosity.options.Options` (``max_patch_size``,
         ``near_order``, ``visibility_samples``, ``solver``, ``rtol``, ``cache``, ...).
+        ``method="hierarchical"`` solves by hierarchical radiosity instead of the uniform
+        fill (:mod:`radiosity.methods.hierarchical`); ``Solution.scene`` is then its leaves.
 
     Returns
     -------
@@ -143,6 +148,12 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     ['back_wall', 'ceiling']
     """
     options = Options.from_preset(preset, **overrides)
+    if options.method not in METHODS:
+        raise TypeError(f"unknown method {options.method!r}; valid: {', '.join(METHODS)}")
+    if options.method == "hierarchical":
+        from .methods.hierarchical import solve_hierarchical
+
+        return solve_hierarchical(scene, options)
     prepared = prepare(scene, options)
     cut = prepared.scene
     F = _without(prepared.F, _inactive(cut))

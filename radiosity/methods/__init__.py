@@ -1,0 +1,1 @@
+"""Solution methods: ``hierarchical`` (element quadtrees and links); the uniform fill lives in ``radiosity.solve``."""

@@ -1,0 +1,123 @@
+"""Hierarchical radiosity (Hanrahan, Salzman & Aupperle 1991) with BF refinement.
+
+Each input patch is the root of an element quadtree (:mod:`._elements`); links between
+elements are refined where a bound on the power they carry, visibility uncertainty included,
+exceeds a tolerance (:mod:`._hierarchy`); form factors come from Lambert's point-to-polygon
+kernel and visibility from the shared classification and rays (:mod:`._links`). Refinement and
+solving alternate until a pass splits no link. The leaves become the solved scene's patches,
+so everything a :class:`radiosity.Solution` offers works unchanged. See ``docs/hierarchical.md``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from ...options import Options
+from ...scene import Scene
+from ...solution import Solution
+from ...system import energy_balance
+from ...visibility import Visibility
+from ._hierarchy import Hierarchy, HierarchyStats, LinkOperator
+
+__all__ = ["solve_hierarchical", "build_hierarchy", "min_element_size", "Hierarchy", "HierarchyStats",
+           "LinkOperator", "MAX_ROUNDS"]
+
+MAX_ROUNDS = 12  # refinement passes at most (each followed by a solve); a pass that splits nothing ends it
+
+
+def min_element_size(scene: Scene, options: Options) -> float:
+    """The minimum element size of a solve, metres, checked against the scene."""
+    size = options.min_element_size
+    if size is None:
+        size = options.min_element_rel * scene.scale
+    if not (np.isfinite(size) and size > 0):
+        raise ValueError(f"min_element_size must be a positive number of metres, got {size!r}")
+    if size > scene.scale:
+        raise ValueError(f"min_element_size {size:g} m is larger than the scene (its bounding-box diagonal "
+                         f"is {scene.scale:g} m)")
+    return float(size)
+
+
+def _check_tolerance(tolerance: float) -> None:
+    if not (np.isfinite(tolerance) and tolerance > 0):
+        raise ValueError(f"link_tolerance must be a positive fraction of the emitted power, got {tolerance!r}")
+
+
+def _roots(scene: Scene, options: Options) -> Scene:
+    """The input patches the quadtrees start from: the scene as loaded, or cut if asked."""
+    if options.max_patch_size is None or (scene.max_patch_size is not None
+                                          and options.max_patch_size >= scene.max_patch_size):
+        return scene
+    return scene.resubdivided(options.max_patch_size)
+
+
+def build_hierarchy(scene: Scene, options: Options) -> Hierarchy:
+    """The (unrefined) hierarchy of a scene under ``options`` (for tests and benches)."""
+    from ...solve import _inactive
+
+    _check_tolerance(options.link_tolerance)
+    size = min_element_size(scene, options)
+    visibility = Visibility(scene.patch_quads, scene.patch_normal, scene.patch_object, scene.scale,
+                            samples=options.visibility_samples, max_samples=options.visibility_max_samples)
+    return Hierarchy(scene.patch_quads, scene.patch_normal, scene.reflectance, scene.emission, ~_inactive(scene),
+                     visibility, min_size=size, tolerance=options.link_tolerance,
+                     formfactor_rtol=options.formfactor_rtol, exact=options.visibility != "rays")
+
+
+def solve_hierarchical(scene: Scene, options: Options) -> Solution:
+    """Solve by hierarchical radiosity; the Solution's scene is the leaf mesh.
+
+    Stopping rule: refine with the current radiosities, solve, and repeat until a refinement
+    pass splits no link (every link then meets the tolerance with the radiosities it was
+    solved with), at most :data:`MAX_ROUNDS` passes.
+    """
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    roots = _roots(scene, options)
+    timings["patches"] = time.perf_counter() - t0
+    hier = build_hierarchy(roots, options)
+    refine_s = solve_s = 0.0
+    for round_ in range(MAX_ROUNDS):
+        t = time.perf_counter()
+        split = hier.refine()
+        refine_s += time.perf_counter() - t
+        hier.stats.rounds = round_ + 1
+        if split == 0 and round_ > 0:
+            hier.stats.converged = True
+            break
+        t = time.perf_counter()
+        B, K, leaves, report = hier.solve(options.rtol)
+        solve_s += time.perf_counter() - t
+    timings["hierarchy"] = refine_s
+    timings["solve"] = solve_s
+    solved = _leaf_scene(roots, hier, leaves)
+    _record(hier, K, leaves)
+    balance = energy_balance(K, solved.patch_area, solved.reflectance, solved.emission, B)
+    return Solution(scene=solved, radiosity=B, F=K, options=options, timings=timings, fill=hier.stats,
+                    solver=report, energy=balance)
+
+
+def _leaf_scene(roots: Scene, hier: Hierarchy, leaves: np.ndarray) -> Scene:
+    """The scene as solved: one patch per leaf element, with its input patch's object and materials."""
+    parent = hier.el.root[leaves]
+    return replace(roots, patch_quads=hier.el.quads[leaves], patch_object=roots.patch_object[parent],
+                   patch_face=roots.patch_face[parent], reflectance=roots.reflectance[parent],
+                   emission=roots.emission[parent], patch_obstruction=roots.patch_obstruction[parent],
+                   patch_hidden=roots.patch_hidden[parent], max_patch_size=None)
+
+
+def _record(hier: Hierarchy, K: LinkOperator, leaves: np.ndarray) -> None:
+    stats = hier.stats
+    stats.links = len(hier.links)
+    stats.partly_visible_links = int(hier.links.partial.sum())
+    stats.pairs_traced = hier.vis.n_traced
+    stats.n_rays = hier.vis.n_rays
+    stats.elements = len(hier.el)
+    stats.leaves = len(leaves)
+    stats.max_level = int(hier.el.level.max())
+    matrices = (K.push, K.gather, K.pull)
+    stats.memory_bytes = int(sum(m.data.nbytes + m.indices.nbytes + m.indptr.nbytes for m in matrices)
+                             + hier.el.quads.nbytes * 3 + len(hier.links) * 50)
