@@ -75,7 +75,7 @@ class Options:
     workers: int | None = None
     scheduler: str | None = None
     method: str = "uniform"
-    link_tolerance: float = 2e-5
+    link_tolerance: float = 3e-3
     min_element_rel: float = 1 / 100
     min_element_size: float | None = None
 
@@ -91,9 +91,9 @@ class Options:
 PRESETS = {
     "draft": Options(patch_size_rel=1 / 12, near_order=2, far_separation=2.0, visibility_samples=2,
                      visibility="rays", visibility_max_samples=3, visibility_rtol=1e-3, formfactor_rtol=1e-3,
-                     link_tolerance=2e-4, min_element_rel=1 / 50),
+                     link_tolerance=1e-2, min_element_rel=1 / 50),
     "default": Options(),
     "fine": Options(patch_size_rel=1 / 35, near_order=4, far_separation=4.0, visibility_samples=3,
                     visibility_max_samples=5, visibility_rtol=1e-5, formfactor_rtol=1e-6,
-                    link_tolerance=2e-6, min_element_rel=1 / 200),
+                    link_tolerance=1e-3, min_element_rel=1 / 200),
 }

@@ -27,8 +27,8 @@ __all__ = ["link_factors", "ElementVisibility", "adaptive_factors"]
 RECEIVER_ORDER = 3  # Gauss points per direction on the receiver: 9 Lambert evaluations per link
 
 
-def link_factors(el: Elements, r: np.ndarray, s: np.ndarray, order: int = RECEIVER_ORDER
-                 ) -> tuple[np.ndarray, np.ndarray]:
+def link_factors(el: Elements, r: np.ndarray, s: np.ndarray, order: int = RECEIVER_ORDER, *, peak: bool = False
+                 ) -> tuple[np.ndarray, ...]:
     """Mean and spread of the point-to-polygon factor over receiver points of each link.
 
     Parameters
@@ -45,10 +45,12 @@ def link_factors(el: Elements, r: np.ndarray, s: np.ndarray, order: int = RECEIV
         Estimate of F(r -> s), unoccluded.
     spread : (m,) float
         Largest minus smallest point value.
+    top : (m,) float
+        With ``peak=True``: the largest point value.
     """
     m = len(r)
     if m == 0:
-        return np.zeros(0), np.zeros(0)
+        return (np.zeros(0),) * (3 if peak else 2)
     points, weights = patch_points(el.quads[r], order)
     q = points.shape[1]
     flat = points.reshape(-1, 3)
@@ -60,7 +62,8 @@ def link_factors(el: Elements, r: np.ndarray, s: np.ndarray, order: int = RECEIV
     values = np.where(height > 0, np.clip(values, 0.0, None), 0.0)
     total = weights.sum(axis=1)
     mean = (values * weights).sum(axis=1) / np.where(total > 0, total, 1.0)
-    return mean, values.max(axis=1) - values.min(axis=1)
+    top = values.max(axis=1)
+    return (mean, top - values.min(axis=1), top) if peak else (mean, top - values.min(axis=1))
 
 
 def adaptive_factors(el: Elements, r: np.ndarray, s: np.ndarray, rtol: float) -> np.ndarray:
