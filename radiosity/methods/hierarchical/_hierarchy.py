@@ -47,7 +47,7 @@ LINK_BYTES = 8 + 8 + 8 + 8 + 8 + 2 + 12 + 40
 ELEMENT_BYTES = 96 + 24 + 24 + 6 * 8 + 24 + 8 * 24
 CHUNK_LINKS = 100_000  # links evaluated at once (bounds the temporaries of the estimates)
 # Share of an undecided link's factor left in doubt when all its rays agree (see _visibility_doubt).
-UNANIMOUS_DOUBT = 0.25
+UNANIMOUS_DOUBT = 1.0
 
 
 @dataclass
