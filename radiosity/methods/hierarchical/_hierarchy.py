@@ -89,9 +89,9 @@ class LinkOperator(spla.LinearOperator):
     fronts its light reaches (as for a view-factor matrix). ``nnz`` counts the links.
     """
 
-    def __init__(self, push: sp.csr_matrix, gather: sp.csr_matrix, pull: sp.csr_matrix):
+    def __init__(self, push: sp.csr_matrix, gather: sp.csr_matrix, pull: sp.csr_matrix, links: int | None = None):
         self.push, self.gather, self.pull = push, gather, pull
-        self.nnz = int(gather.nnz)
+        self.nnz = int(gather.nnz if links is None else links)  # G drops links hidden by their rays
         super().__init__(dtype=np.float64, shape=(push.shape[0], pull.shape[1]))
 
     def _matvec(self, x):
@@ -298,7 +298,7 @@ class Hierarchy:
             kept = [self.links.take(~split)]
             work = self.links.take(split)
             work = self._evaluate(*self._expand(work)) if len(work) else work
-        n_split = 0
+        n_split = 0 if not self.stats.split_per_round else len(self.links) - sum(len(k) for k in kept)
         while len(work):
             err = self.error(work)
             can = self.el.splittable
@@ -329,7 +329,7 @@ class Hierarchy:
         share = el.area[leaves][rows] / np.where(el.area[elements] > 0, el.area[elements], 1.0)
         pull = sp.csr_matrix((share, (elements, rows)), shape=(ne, nl))
         gather = sp.csr_matrix((self.links.factor * self.links.visible, (self.links.r, self.links.s)), shape=(ne, ne))
-        return LinkOperator(push, gather, pull), leaves
+        return LinkOperator(push, gather, pull, len(self.links)), leaves
 
     def solve(self, rtol: float) -> tuple[np.ndarray, LinkOperator, np.ndarray, SolveReport]:
         """Leaf radiosities (l, 3) of B = E + rho K B; element radiosities are pulled from them."""
