@@ -7,7 +7,9 @@ other in this run, so the times compare (the machine is shared: read ratios, not
 error is the largest relative difference of an object's mean radiosity (any channel, the light
 left out) from ``bench/results/cornell_reference.json`` (uniform ``fine`` at 2 cm, 6,494
 patches). ``--scale`` adds a hierarchical case with 3.5 mm minimum elements (the issue's
-100k-leaf target). Writes ``bench/results/hierarchical.json``.
+100k-leaf target); ``--matched`` runs only the uniform fill at about the leaf count of
+hierarchical ``draft`` and that case (``hierarchical_matched.json``). Writes
+``bench/results/hierarchical.json``.
 """
 
 from __future__ import annotations
@@ -45,7 +47,10 @@ def run_case(spec: dict) -> dict:
             "timings": solution.timings}
 
 
-def cases(quick: bool, scale: bool) -> list[dict]:
+def cases(quick: bool, scale: bool, matched: bool = False) -> list[dict]:
+    if matched:  # the uniform fill at about the leaf count of hierarchical draft (5,256 leaves)
+        return [{"method": "uniform", "preset": "draft", "max_patch_size": 0.0125},
+                {"method": "hierarchical", "preset": "draft"}]
     out = [{"method": "uniform", "preset": "draft"},
            {"method": "hierarchical", "preset": "draft", "link_tolerance": 3e-2, "min_element_rel": 1 / 25},
            {"method": "hierarchical", "preset": "draft", "link_tolerance": 1e-2, "min_element_rel": 1 / 25},
@@ -61,9 +66,13 @@ def main() -> None:
     if len(sys.argv) > 2 and sys.argv[1] == "--case":
         print(json.dumps(run_case(json.loads(sys.argv[2]))))
         return
-    args = parse_args(__doc__.splitlines()[0], extra=lambda p: p.add_argument("--scale", action="store_true"))
+    def extra(p):
+        p.add_argument("--scale", action="store_true")
+        p.add_argument("--matched", action="store_true", help="only uniform at ~5k patches vs hierarchical draft")
+
+    args = parse_args(__doc__.splitlines()[0], extra=extra)
     rows = []
-    for spec in cases(args.quick, args.scale):
+    for spec in cases(args.quick, args.scale, args.matched):
         done = subprocess.run([sys.executable, str(Path(__file__)), "--case", json.dumps(spec)], capture_output=True,
                               text=True, cwd=HERE)
         if done.returncode != 0:
@@ -72,9 +81,9 @@ def main() -> None:
             continue
         rows.append(json.loads(done.stdout.strip().splitlines()[-1]))
         print(json.dumps(rows[-1]), flush=True)
-    print_table(rows, ["method", "preset", "link_tolerance", "min_element_rel", "seconds", "patches",
+    print_table(rows, ["method", "preset", "link_tolerance", "min_element_rel", "max_patch_size", "seconds", "patches",
                        "links_or_nonzeros", "max_object_error", "peak_rss_MB"], title="Cornell box")
-    path = write_json("hierarchical", {"reference": "bench/results/cornell_reference.json (uniform fine, 2 cm)",
+    path = write_json("hierarchical_matched" if args.matched else "hierarchical", {"reference": "bench/results/cornell_reference.json (uniform fine, 2 cm)",
                                        "cases": rows})
     print(f"wrote {path}")
 

@@ -165,6 +165,16 @@ def test_cli_method_hierarchical(tmp_path):
                  "--link-tolerance", "0", "-o", str(out)]) == 2
 
 
+def test_links_grow_slower_than_the_leaves(furnace):
+    """Halving the minimum size: 4x the leaves where needed, links ~linear in them (never n^2)."""
+    coarse = solve_h(furnace, link_tolerance=3e-2, min_element_rel=1 / 10).fill
+    fine = solve_h(furnace, link_tolerance=3e-2, min_element_rel=1 / 20).fill
+    leaves, links = fine.leaves / coarse.leaves, fine.links / coarse.links
+    print("leaves x", leaves, "links x", links)
+    assert leaves > 2.0
+    assert links < 1.5 * leaves  # a full matrix would grow as leaves**2
+
+
 def test_refinement_is_deterministic(furnace):
     a = solve_h(furnace, link_tolerance=1e-2, min_element_rel=1 / 10)
     b = solve_h(furnace, link_tolerance=1e-2, min_element_rel=1 / 10)
