@@ -193,6 +193,13 @@ def test_bad_knobs_are_refused(bad):
         solve_h(scene, **bad)
 
 
+def test_progress_bar_runs(capsys):
+    scene = radiosity.load_scene(radiosity.bundled_scene("unit_cube"))
+    solution = solve_h(scene, link_tolerance=5e-2, progress=True)
+    assert solution.fill.links_evaluated > 0
+    assert "hierarchy" in capsys.readouterr().err
+
+
 def test_unknown_method_is_refused():
     scene = radiosity.load_scene(radiosity.bundled_scene("unit_cube"))
     with pytest.raises(TypeError, match="unknown method 'radial'"):

@@ -79,8 +79,36 @@ def solve_hierarchical(scene: Scene, options: Options) -> Solution:
     roots = _roots(scene, options)
     timings["patches"] = time.perf_counter() - t0
     hier = build_hierarchy(roots, options)
+    bar = _progress(options.progress)
+    if bar is not None:
+        hier.progress = bar.update
+    try:
+        B, K, leaves, report = _alternate(hier, options, timings, bar)
+    finally:
+        if bar is not None:
+            bar.close()
+    solved = _leaf_scene(roots, hier, leaves)
+    _record(hier, K, leaves)
+    balance = energy_balance(K, solved.patch_area, solved.reflectance, solved.emission, B)
+    return Solution(scene=solved, radiosity=B, F=K, options=options, timings=timings, fill=hier.stats,
+                    solver=report, energy=balance)
+
+
+def _progress(enabled: bool):
+    """A tqdm bar counting links evaluated (the total is not known in advance), or None."""
+    if not enabled:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(desc="hierarchy", unit="link", leave=False)
+
+
+def _alternate(hier: Hierarchy, options: Options, timings: dict, bar):
+    """Refine and solve in turn until a pass splits no link (at most MAX_ROUNDS passes)."""
     refine_s = solve_s = 0.0
     for round_ in range(MAX_ROUNDS):
+        if bar is not None:
+            bar.set_postfix_str(f"pass {round_ + 1}")
         t = time.perf_counter()
         split = hier.refine()
         refine_s += time.perf_counter() - t
@@ -93,11 +121,7 @@ def solve_hierarchical(scene: Scene, options: Options) -> Solution:
         solve_s += time.perf_counter() - t
     timings["hierarchy"] = refine_s
     timings["solve"] = solve_s
-    solved = _leaf_scene(roots, hier, leaves)
-    _record(hier, K, leaves)
-    balance = energy_balance(K, solved.patch_area, solved.reflectance, solved.emission, B)
-    return Solution(scene=solved, radiosity=B, F=K, options=options, timings=timings, fill=hier.stats,
-                    solver=report, energy=balance)
+    return B, K, leaves, report
 
 
 def _leaf_scene(roots: Scene, hier: Hierarchy, leaves: np.ndarray) -> Scene:

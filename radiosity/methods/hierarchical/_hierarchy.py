@@ -197,6 +197,7 @@ class Hierarchy:
         self.links = Links.empty()
         self.stats = HierarchyStats(roots=len(quads), min_element_size=float(min_size), eps=float(self.eps))
         self._started = False
+        self.progress = lambda n: None  # called with the number of links evaluated (a progress bar)
 
     # ------------------------------------------------------------------ refinement
     def initial_pairs(self) -> tuple[np.ndarray, np.ndarray]:
@@ -233,6 +234,7 @@ class Hierarchy:
         for a in range(0, len(r), CHUNK_LINKS):
             rr, ss = r[a:a + CHUNK_LINKS], s[a:a + CHUNK_LINKS]
             self.stats.links_evaluated += len(rr)
+            self.progress(len(rr))
             facing, crossing = _facing(self.el, rr, ss)
             rr, ss, crossing = rr[facing], ss[facing], crossing[facing]
             factor, spread, peak = link_factors(self.el, rr, ss, peak=True)
