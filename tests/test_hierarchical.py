@@ -176,8 +176,8 @@ def test_links_grow_slower_than_the_leaves(furnace):
 
 
 def test_refinement_is_deterministic(furnace):
-    a = solve_h(furnace, link_tolerance=1e-2, min_element_rel=1 / 10)
-    b = solve_h(furnace, link_tolerance=1e-2, min_element_rel=1 / 10)
+    a = solve_h(furnace, link_tolerance=5e-2, min_element_rel=1 / 10)
+    b = solve_h(furnace, link_tolerance=5e-2, min_element_rel=1 / 10)
     np.testing.assert_array_equal(a.scene.patch_quads, b.scene.patch_quads)
     np.testing.assert_array_equal(a.radiosity, b.radiosity)
 
