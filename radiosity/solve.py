@@ -151,9 +151,7 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     if options.method not in METHODS:
         raise TypeError(f"unknown method {options.method!r}; valid: {', '.join(METHODS)}")
     if options.method == "hierarchical":
-        from .methods.hierarchical import solve_hierarchical
-
-        return solve_hierarchical(scene, options)
+        return _solve_hierarchical(scene, options)
     prepared = prepare(scene, options)
     cut = prepared.scene
     F = _without(prepared.F, _inactive(cut))
@@ -166,6 +164,17 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     balance = energy_balance(F, cut.patch_area, cut.reflectance, cut.emission, radiosity)
     return Solution(scene=cut, radiosity=radiosity, F=F, options=options, timings=timings,
                     fill=prepared.stats, solver=report, energy=balance, cache_hit=prepared.cache_hit)
+
+
+def _solve_hierarchical(scene: Scene, options: Options) -> Solution:
+    """The Solution of :mod:`radiosity.methods.hierarchical` (its scene: the leaf mesh)."""
+    from .methods.hierarchical import solve_hierarchical
+
+    result = solve_hierarchical(scene, options)
+    leaves = result.scene
+    balance = energy_balance(result.F, leaves.patch_area, leaves.reflectance, leaves.emission, result.radiosity)
+    return Solution(scene=leaves, radiosity=result.radiosity, F=result.F, options=options, timings=result.timings,
+                    fill=result.stats, solver=result.report, energy=balance)
 
 
 def _fill_key(geometry_hash: str, inactive: np.ndarray) -> str:

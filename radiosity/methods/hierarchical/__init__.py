@@ -5,25 +5,25 @@ elements are refined where a bound on the power they carry, visibility uncertain
 exceeds a tolerance (:mod:`._hierarchy`); form factors come from Lambert's point-to-polygon
 kernel and visibility from the shared classification and rays (:mod:`._links`). Refinement and
 solving alternate until a pass splits no link. The leaves become the solved scene's patches,
-so everything a :class:`radiosity.Solution` offers works unchanged. See ``docs/hierarchical.md``.
+so everything a :class:`radiosity.Solution` offers works unchanged (``radiosity.solve`` makes the
+Solution of :class:`HierarchicalResult`: a method does not import the solution stage). See
+``docs/hierarchical.md``.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ...options import Options
 from ...scene import Scene
-from ...solution import Solution
-from ...system import energy_balance
 from ...visibility import Visibility
-from ._hierarchy import Hierarchy, HierarchyStats, LinkOperator
+from ._hierarchy import Hierarchy, HierarchyStats, LinkOperator, SolveReport
 
 __all__ = ["solve_hierarchical", "build_hierarchy", "min_element_size", "Hierarchy", "HierarchyStats",
-           "LinkOperator", "MAX_ROUNDS"]
+           "LinkOperator", "HierarchicalResult", "MAX_ROUNDS"]
 
 MAX_ROUNDS = 12  # refinement passes at most (each followed by a solve); a pass that splits nothing ends it
 
@@ -54,10 +54,13 @@ def _roots(scene: Scene, options: Options) -> Scene:
     return scene.resubdivided(options.max_patch_size)
 
 
+def _inactive(scene: Scene) -> np.ndarray:
+    """Patches that exchange no light: obstructions and hidden patches (as in the uniform solve)."""
+    return scene.patch_obstruction | scene.patch_hidden
+
+
 def build_hierarchy(scene: Scene, options: Options) -> Hierarchy:
     """The (unrefined) hierarchy of a scene under ``options`` (for tests and benches)."""
-    from ...solve import _inactive
-
     _check_tolerance(options.link_tolerance)
     size = min_element_size(scene, options)
     visibility = Visibility(scene.patch_quads, scene.patch_normal, scene.patch_object, scene.scale,
@@ -67,8 +70,32 @@ def build_hierarchy(scene: Scene, options: Options) -> Hierarchy:
                      formfactor_rtol=options.formfactor_rtol, exact=options.visibility != "rays")
 
 
-def solve_hierarchical(scene: Scene, options: Options) -> Solution:
-    """Solve by hierarchical radiosity; the Solution's scene is the leaf mesh.
+@dataclass
+class HierarchicalResult:
+    """What the method hands back to ``radiosity.solve``, which makes the Solution of it.
+
+    Attributes
+    ----------
+    scene : Scene
+        The leaf mesh (the scene as solved).
+    radiosity : (n_leaves, 3) float
+    F : LinkOperator
+        ``K = P G R`` on the leaves (``K @ B`` is their irradiance).
+    stats : HierarchyStats
+    report : SolveReport
+    timings : dict
+    """
+
+    scene: Scene
+    radiosity: np.ndarray
+    F: LinkOperator
+    stats: HierarchyStats
+    report: SolveReport
+    timings: dict
+
+
+def solve_hierarchical(scene: Scene, options: Options) -> HierarchicalResult:
+    """Solve by hierarchical radiosity; the result's scene is the leaf mesh.
 
     Stopping rule: refine with the current radiosities, solve, and repeat until a refinement
     pass splits no link (every link then meets the tolerance with the radiosities it was
@@ -87,11 +114,8 @@ def solve_hierarchical(scene: Scene, options: Options) -> Solution:
     finally:
         if bar is not None:
             bar.close()
-    solved = _leaf_scene(roots, hier, leaves)
     _record(hier, K, leaves)
-    balance = energy_balance(K, solved.patch_area, solved.reflectance, solved.emission, B)
-    return Solution(scene=solved, radiosity=B, F=K, options=options, timings=timings, fill=hier.stats,
-                    solver=report, energy=balance)
+    return HierarchicalResult(_leaf_scene(roots, hier, leaves), B, K, hier.stats, report, timings)
 
 
 def _progress(enabled: bool):
