@@ -68,7 +68,7 @@ def main() -> None:
         return
     def extra(p):
         p.add_argument("--scale", action="store_true")
-        p.add_argument("--matched", action="store_true", help="only uniform at ~5k patches vs hierarchical draft")
+        p.add_argument("--matched", action="store_true", help="only uniform at 12.5 mm vs hierarchical draft")
 
     args = parse_args(__doc__.splitlines()[0], extra=extra)
     rows = []
@@ -83,8 +83,8 @@ def main() -> None:
         print(json.dumps(rows[-1]), flush=True)
     print_table(rows, ["method", "preset", "link_tolerance", "min_element_rel", "max_patch_size", "seconds", "patches",
                        "links_or_nonzeros", "max_object_error", "peak_rss_MB"], title="Cornell box")
-    path = write_json("hierarchical_matched" if args.matched else "hierarchical", {"reference": "bench/results/cornell_reference.json (uniform fine, 2 cm)",
-                                       "cases": rows})
+    name = "hierarchical_matched" if args.matched else "hierarchical"
+    path = write_json(name, {"reference": "bench/results/cornell_reference.json (uniform fine, 2 cm)", "cases": rows})
     print(f"wrote {path}")
 
 
