@@ -1,8 +1,8 @@
 """Hierarchical radiosity (Hanrahan, Salzman & Aupperle 1991) with BF refinement.
 
 Each input patch is the root of an element quadtree (:mod:`._elements`); links between
-elements are refined where a bound on the power they carry, visibility uncertainty included,
-exceeds a tolerance (:mod:`._hierarchy`); form factors come from Lambert's point-to-polygon
+elements are refined where a bound on the radiosity error they make (per unit area of the
+power they carry), visibility uncertainty included, exceeds a tolerance (:mod:`._hierarchy`); form factors come from Lambert's point-to-polygon
 kernel and visibility from the shared classification and rays (:mod:`._links`). Refinement and
 solving alternate until a pass splits no link. The leaves become the solved scene's patches,
 so everything a :class:`radiosity.Solution` offers works unchanged (``radiosity.solve`` makes the
@@ -43,7 +43,7 @@ def min_element_size(scene: Scene, options: Options) -> float:
 
 def _check_tolerance(tolerance: float) -> None:
     if not (np.isfinite(tolerance) and tolerance > 0):
-        raise ValueError(f"link_tolerance must be a positive fraction of the emitted power, got {tolerance!r}")
+        raise ValueError(f"link_tolerance must be a positive fraction of the mean emitted exitance, got {tolerance!r}")
 
 
 def _roots(scene: Scene, options: Options) -> Scene:

@@ -173,7 +173,7 @@ class Hierarchy:
     min_size : float
         Minimum element size, metres.
     tolerance : float
-        Link error bound as a fraction of the emitted power (largest channel).
+        Link error bound (W/m^2) as a fraction of the mean emitted exitance (largest channel).
     formfactor_rtol : float
         Accuracy of the adaptive factors of links at the minimum size.
     exact : bool
