@@ -1,9 +1,9 @@
 """Hierarchical radiosity (Hanrahan, Salzman & Aupperle 1991) with BF refinement.
 
 Each input patch is the root of an element quadtree (:mod:`._elements`); links between
-elements are refined where a bound on the radiosity error they make (per unit area of the
-power they carry), visibility uncertainty included, exceeds a tolerance (:mod:`._hierarchy`); form factors come from Lambert's point-to-polygon
-kernel and visibility from the shared classification and rays (:mod:`._links`). Refinement and
+elements are refined where a bound on the radiosity error they make, visibility uncertainty
+included, exceeds a tolerance (:mod:`._hierarchy`); form factors come from Lambert's
+point-to-polygon kernel and visibility from the shared classification and rays (:mod:`._links`). Refinement and
 solving alternate until a pass splits no link. The leaves become the solved scene's patches,
 so everything a :class:`radiosity.Solution` offers works unchanged (``radiosity.solve`` makes the
 Solution of :class:`HierarchicalResult`: a method does not import the solution stage). See
