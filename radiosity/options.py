@@ -46,6 +46,17 @@ class Options:
         (:mod:`radiosity.methods.uniform.cluster`; needs ``radiosity[cluster]``). None: in this process.
     scheduler : str or None
         Fill it on the running Dask cluster at this address (``tcp://host:8786``) instead.
+    method : {"uniform", "hierarchical"}
+        ``"uniform"`` fills the view-factor matrix of the cut patches; ``"hierarchical"``
+        refines element quadtrees and links where they matter (``docs/hierarchical.md``).
+    link_tolerance : float
+        Hierarchical only: a link is refined while a bound on the radiosity error it makes
+        exceeds this fraction of the scene's mean emitted exitance (emitted power / area).
+    min_element_rel : float
+        Hierarchical only: smallest element edge as a fraction of the scene's bounding-box
+        diagonal (unless ``min_element_size`` is given).
+    min_element_size : float or None
+        Hierarchical only: smallest element edge in metres; overrides ``min_element_rel``.
     """
 
     patch_size_rel: float = 1 / 25
@@ -63,6 +74,10 @@ class Options:
     progress: bool = False
     workers: int | None = None
     scheduler: str | None = None
+    method: str = "uniform"
+    link_tolerance: float = 3e-3
+    min_element_rel: float = 1 / 100
+    min_element_size: float | None = None
 
     @classmethod
     def from_preset(cls, preset: str = "default", **overrides) -> "Options":
@@ -75,8 +90,10 @@ class Options:
 
 PRESETS = {
     "draft": Options(patch_size_rel=1 / 12, near_order=2, far_separation=2.0, visibility_samples=2,
-                     visibility="rays", visibility_max_samples=3, visibility_rtol=1e-3, formfactor_rtol=1e-3),
+                     visibility="rays", visibility_max_samples=3, visibility_rtol=1e-3, formfactor_rtol=1e-3,
+                     link_tolerance=1e-2, min_element_rel=1 / 50),
     "default": Options(),
     "fine": Options(patch_size_rel=1 / 35, near_order=4, far_separation=4.0, visibility_samples=3,
-                    visibility_max_samples=5, visibility_rtol=1e-5, formfactor_rtol=1e-6),
+                    visibility_max_samples=5, visibility_rtol=1e-5, formfactor_rtol=1e-6,
+                    link_tolerance=1e-3, min_element_rel=1 / 200),
 }

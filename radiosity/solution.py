@@ -155,6 +155,8 @@ class Solution:
             "emission": emission_reading(scene.emission_mode),
             "emitter_rays": scene.light_paths,
             "notes": list(scene.notes),
+            "method": getattr(self.options, "method", "uniform"),
+            "hierarchy": fill.summary() if hasattr(fill, "summary") else None,
         }
 
 

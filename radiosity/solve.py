@@ -23,6 +23,9 @@ from .visibility import Visibility
 __all__ = ["solve", "view_factors", "compute_view_factors", "write_view_factors", "prepare"]
 
 
+METHODS = ("uniform", "hierarchical")
+
+
 @dataclass
 class Prepared:
     """A scene cut for solving and its view-factor matrix, with what it cost."""
@@ -126,6 +129,8 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     **overrides
         Any field of :class:`radiosity.options.Options` (``max_patch_size``,
         ``near_order``, ``visibility_samples``, ``solver``, ``rtol``, ``cache``, ...).
+        ``method="hierarchical"`` solves by hierarchical radiosity instead of the uniform
+        fill (:mod:`radiosity.methods.hierarchical`); ``Solution.scene`` is then its leaves.
 
     Returns
     -------
@@ -146,6 +151,10 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     ['back_wall', 'ceiling']
     """
     options = Options.from_preset(preset, **overrides)
+    if options.method not in METHODS:
+        raise TypeError(f"unknown method {options.method!r}; valid: {', '.join(METHODS)}")
+    if options.method == "hierarchical":
+        return _solve_hierarchical(scene, options)
     t0 = time.perf_counter()
     cut = _cut(scene, options)
     cut_seconds = time.perf_counter() - t0
@@ -221,6 +230,17 @@ def _solve_out_of_core(cut, options, refusal: MemoryBudgetError, timings: dict[s
                "budget": f"{_memory.format_bytes(budget)} ({source})"}
     return Solution(scene=cut, radiosity=radiosity, F=F, options=options, timings=timings, fill=stats,
                     solver=report, energy=balance, view_factor_storage=storage)
+
+
+def _solve_hierarchical(scene: Scene, options: Options) -> Solution:
+    """The Solution of :mod:`radiosity.methods.hierarchical` (its scene: the leaf mesh)."""
+    from .methods.hierarchical import solve_hierarchical
+
+    result = solve_hierarchical(scene, options)
+    leaves = result.scene
+    balance = energy_balance(result.F, leaves.patch_area, leaves.reflectance, leaves.emission, result.radiosity)
+    return Solution(scene=leaves, radiosity=result.radiosity, F=result.F, options=options, timings=result.timings,
+                    fill=result.stats, solver=result.report, energy=balance)
 
 
 def _fill_key(geometry_hash: str, inactive: np.ndarray) -> str:

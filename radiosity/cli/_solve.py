@@ -19,7 +19,7 @@ from ..io.obj import MAX_COORDINATE
 from ..solve import solve
 from ..methods.uniform.system import DIRECT_MAX
 from ..viz import auto_exposure, white_balanced
-from ._common import add_camera_arg, add_scene_args, load, overrides, unit_scale
+from ._common import add_camera_arg, add_scene_args, load, overrides, positive_metres, unit_scale
 from ._record import run_record
 
 SENSOR_RTOL = 1e-3  # default bound on a sensor value's relative error from shadows
@@ -38,6 +38,15 @@ def add_args(parser) -> None:
                         help="linear solver for (I - rho F) B = E: auto takes a direct sparse LU up to "
                              f"{DIRECT_MAX:,} patches and bicgstab beyond; jacobi, gauss-seidel and "
                              "progressive (shooting) are there to compare (default: %(default)s)")
+    parser.add_argument("--method", choices=("uniform", "hierarchical"), default="uniform",
+                        help="uniform: fill the view-factor matrix of the cut patches; hierarchical: refine "
+                             "element quadtrees and links only where the light needs them, for large or finely "
+                             "cut scenes (docs/hierarchical.md; default: %(default)s)")
+    parser.add_argument("--link-tolerance", type=positive_fraction, default=None, metavar="TOL",
+                        help="hierarchical: refine a link while its radiosity error bound exceeds TOL times the "
+                             "scene's mean emitted exitance (default: the preset's)")
+    parser.add_argument("--min-element-size", type=positive_metres, default=None, metavar="METRES",
+                        help="hierarchical: smallest element edge (default: the preset's share of the scene size)")
     parser.add_argument("--no-picture", action="store_true", help="skip the PNG")
     add_camera_arg(parser)
     parser.add_argument("--white-balance", choices=("none", "light"), default="none",
@@ -53,6 +62,27 @@ def add_args(parser) -> None:
     parser.add_argument("--sensor-rtol", type=sensor_rtol, default=SENSOR_RTOL, metavar="RTOL",
                         help="bound on the relative error of each --points value due to shadows "
                              "(0: every shadow exact; default: %(default)g)")
+
+
+def positive_fraction(text: str) -> float:
+    """argparse type of ``--link-tolerance``: a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (np.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return value
+
+
+def _method_options(args) -> dict:
+    """The solve options of ``--method`` and the hierarchical knobs given."""
+    out = {"method": args.method}
+    if args.link_tolerance is not None:
+        out["link_tolerance"] = args.link_tolerance
+    if args.min_element_size is not None:
+        out["min_element_size"] = args.min_element_size
+    return out
 
 
 def sensor_rtol(text: str) -> float:
@@ -79,6 +109,11 @@ def format_summary(solution, load_seconds: float, compile_seconds: float = 0.0) 
         lines.append(f"matrix     out of core: F needs up to {storage['estimate_in_memory']}, budget "
                      f"{storage['budget']}; {storage['shards']} shards of {storage['pairs_per_block']:,} pairs, "
                      f"{storage['passes']} passes over them")
+    if s.get("hierarchy"):
+        h = s["hierarchy"]
+        lines.append(f"hierarchy  {h['roots']} input patches -> {h['leaves']:,} leaves (level {h['max_level']}), "
+                     f"{h['links']:,} links ({h['partly_visible_links']:,} partly visible), {h['rounds']} rounds"
+                     + ("" if h["converged"] else " (stopped at the cap: not converged)"))
     sol = s["solver"]
     fallback = sorted({f for f in sol.get("fallback", []) if f})
     lines.append(f"solver     {sol['method']}, iterations {sol['iterations']}, residual {max(sol['residual']):.1e}"
@@ -195,7 +230,7 @@ def run(args) -> int:
                 print(FIRST_RUN_MESSAGE, file=sys.stderr, flush=True)
             warm_up()
         solution = solve(scene, preset=args.preset, solver=args.solver, progress=sys.stderr.isatty(),
-                         **overrides(args))
+                         **overrides(args), **_method_options(args))
         check_free_space(out, output_bytes(solution.scene.n_patches, 0 if points is None else len(points)))
         h = None
         if points is not None:

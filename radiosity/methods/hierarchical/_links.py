@@ -1,0 +1,149 @@
+"""What one link carries: its form factor (Lambert at receiver points) and its visibility.
+
+A link (r, s) lets element r gather from element s: H_r += F_rs V_rs B_s. Its estimates:
+
+- ``F_rs``: the mean over Gauss points x_q of r of Lambert's exact point-to-polygon factor
+  F(x_q -> s), zero where x_q is behind s (sources are one-sided). The spread of the point
+  values, ``max - min``, says how far one constant per receiver is from the truth.
+- ``V_rs``: the exact classification of :class:`radiosity.visibility.Visibility` first (the
+  input patches are the occluders: an element lies in its patch's plane, so its own patch never
+  counts); only pairs it leaves undecided trace stratified rays (kernel-weighted). Such a link
+  is *partly visible*: its whole power is uncertain, whatever its rays say.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+
+from ...formfactors import lambert_indexed
+from ...formfactors import pair_factors, patch_points
+from ...visibility import FULL, MAYBE, Visibility
+from ._elements import Elements
+
+__all__ = ["link_factors", "ElementVisibility", "adaptive_factors"]
+
+RECEIVER_ORDER = 3  # Gauss points per direction on the receiver: 9 Lambert evaluations per link
+
+
+def link_factors(el: Elements, r: np.ndarray, s: np.ndarray, order: int = RECEIVER_ORDER, *, peak: bool = False
+                 ) -> tuple[np.ndarray, ...]:
+    """Mean and spread of the point-to-polygon factor over receiver points of each link.
+
+    Parameters
+    ----------
+    el : Elements
+    r, s : (m,) int
+        Receiver and source elements.
+    order : int
+        Gauss points per direction on the receiver.
+
+    Returns
+    -------
+    mean : (m,) float
+        Estimate of F(r -> s), unoccluded.
+    spread : (m,) float
+        Largest minus smallest point value.
+    top : (m,) float
+        With ``peak=True``: the largest point value.
+    """
+    m = len(r)
+    if m == 0:
+        return (np.zeros(0),) * (3 if peak else 2)
+    points, weights = patch_points(el.quads[r], order)
+    q = points.shape[1]
+    flat = points.reshape(-1, 3)
+    normals = np.repeat(el.normal[r], q, axis=0)
+    sources = np.repeat(s, q)
+    values = lambert_indexed(flat, normals, el.quads, np.arange(m * q), sources).reshape(m, q)
+    # One-sided sources: a receiver point behind the source's plane sees its back.
+    height = np.einsum("mqc,mc->mq", points - el.centroid[s][:, None, :], el.normal[s])
+    values = np.where(height > 0, np.clip(values, 0.0, None), 0.0)
+    total = weights.sum(axis=1)
+    mean = (values * weights).sum(axis=1) / np.where(total > 0, total, 1.0)
+    top = values.max(axis=1)
+    return (mean, top - values.min(axis=1), top) if peak else (mean, top - values.min(axis=1))
+
+
+def adaptive_factors(el: Elements, r: np.ndarray, s: np.ndarray, rtol: float) -> np.ndarray:
+    """F(r -> s) to ``rtol`` by the uniform fill's adaptive quadrature (near and touching pairs)."""
+    if len(r) == 0:
+        return np.zeros(0)
+    return pair_factors(el.quads, el.normal, el.centroid, el.area, r, s, rtol=rtol)
+
+
+class ElementVisibility:
+    """Visibility between elements, with the input patches as occluders.
+
+    Parameters
+    ----------
+    patches : Visibility
+        Built over the input patches (its occluders, classification and ray settings are used).
+    """
+
+    def __init__(self, patches: Visibility):
+        self.patches = patches
+        self.n_rays = 0
+        self.n_classified = 0
+        self.n_traced = 0
+        self.n_exact = 0
+
+    def _over(self, el: Elements) -> Visibility:
+        """The patches' Visibility looking at the elements' geometry instead (same occluders)."""
+        view = copy.copy(self.patches)
+        view.quads = el.quads
+        view.normals = el.normal
+        view._lo = el.quads.min(axis=1)
+        view._hi = el.quads.max(axis=1)
+        view.n_rays = 0
+        view.n_exact_rows = 0
+        return view
+
+    def fractions(self, el: Elements, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Visible fraction and "partly visible" flag of each link (r receives from s).
+
+        Returns
+        -------
+        visible : (m,) float
+            1 for pairs nothing can block, -1 for pairs an occluder blocks entirely, else the
+            kernel-weighted fraction of stratified rays that pass.
+        partial : (m,) bool
+            The classification left the pair undecided (partly visible, whatever the rays say).
+        """
+        m = len(r)
+        visible = np.ones(m)
+        partial = np.zeros(m, bool)
+        if m == 0:
+            return visible, partial
+        view = self._over(el)
+        status, rows, occ = view.classify(r, s)
+        self.n_classified += m
+        visible[status == FULL] = -1.0
+        part = np.flatnonzero(status == MAYBE)
+        if len(part):
+            local = np.full(m, -1)
+            local[part] = np.arange(len(part))
+            visible[part] = view.ray_fraction(r[part], s[part], rows=local[rows], occ=occ)
+            partial[part] = True
+            self.n_traced += len(part)
+        self.n_rays += view.n_rays
+        return visible, partial
+
+    def exact(self, el: Elements, r: np.ndarray, s: np.ndarray, order: int = 2) -> np.ndarray:
+        """(m,) visible fraction by exact shadow clipping at ``order**2`` receiver points."""
+        m = len(r)
+        out = np.ones(m)
+        if m == 0:
+            return out
+        view = self._over(el)
+        status, rows, occ = view.classify(r, s)
+        out[status == FULL] = 0.0
+        part = np.flatnonzero(status == MAYBE)
+        if len(part):
+            local = np.full(m, -1)
+            local[part] = np.arange(len(part))
+            out[part] = view.exact_fraction(r[part], s[part], local[rows], occ, order)
+        self.n_exact += len(part)
+        return np.clip(out, 0.0, 1.0)
+
