@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry import vector_areas
 from ._constants import MAX_UNION, SNAP_REL
 
 __all__ = ["clip_convex", "hidden_polygons", "hidden_factors", "point_factors", "union_factors"]
@@ -93,8 +94,7 @@ def hidden_polygons(x: np.ndarray, source: np.ndarray, source_normal: np.ndarray
     planes *= np.where(orient < 0, -1.0, 1.0)[..., None]
     # a degenerate cone (x in the occluder's plane, or nothing left of it) hides nothing
     apex = np.abs(np.einsum("rc,rc->r", x - occluder.mean(axis=1), occluder_normal))
-    centred = k2 - k2.mean(axis=1, keepdims=True)
-    area2 = np.linalg.norm(np.cross(centred, np.roll(centred, -1, axis=1)).sum(axis=1), axis=1)
+    area2 = 2.0 * np.linalg.norm(vector_areas(k2), axis=1)  # twice the area, exactly
     size = np.linalg.norm(occluder - occluder.mean(axis=1, keepdims=True), axis=2).max(axis=1)
     empty = (apex <= tol) | (area2 <= (tol * tol)) | (dx <= tol) | (size <= tol)
     poly = source
