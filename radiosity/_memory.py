@@ -21,7 +21,7 @@ import numpy as np
 from . import _tol
 from ._errors import MemoryBudgetError
 
-__all__ = ["ENV_BUDGET", "budget_bytes", "check", "check_fill", "check_solve", "check_rays", "check_patches",
+__all__ = ["ENV_BUDGET", "budget_bytes", "check", "check_fill", "check_solve", "check_patches",
            "check_cut", "patch_bound", "fill_bytes", "solve_bytes", "format_bytes", "plan_fill_block"]
 
 ENV_BUDGET = "RADIOSITY_MEMORY_BUDGET"
@@ -38,10 +38,6 @@ SOLVE_BYTES_PER_FACTOR = 24
 
 # A sparse LU of the radiosity system fills in to nearly dense: L and U, float64 each.
 DIRECT_BYTES_PER_PAIR = 16
-
-# Bytes per shadow ray in flight: float64 origins, ends and directions (72), their float32
-# copies for Embree (24), distances and weights (~24), with headroom for temporaries.
-BYTES_PER_RAY = 160
 
 # Bytes per patch while faces are cut: the (n, 4, 3) float64 patch array (96 bytes), the
 # sub-grids it is cut from and the concatenation copy, with headroom.
@@ -189,12 +185,6 @@ def check_solve(n_patches: int, nnz: int, method: str = "auto", *, budget: int |
         knob = "use an iterative solver (--solver bicgstab) or " + _COARSER.removeprefix("use ")
     return check(f"the {method} solve of {n_patches:,} patches", solve_bytes(n_patches, nnz, method), knob,
                  budget=budget)
-
-
-def check_rays(n_rays: int, *, budget: int | None = None) -> int:
-    """Raise before a batch of ``n_rays`` shadow rays that would not fit in memory."""
-    return check(f"a batch of {n_rays:,} shadow rays", int(n_rays) * BYTES_PER_RAY,
-                 "use fewer visibility samples (--preset draft)", budget=budget)
 
 
 def patch_bound(vertices: np.ndarray, faces: list[np.ndarray], max_patch_size: float | None) -> int:

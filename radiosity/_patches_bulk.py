@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _tol
+from .geometry import vector_areas
 
 __all__ = ["whole_faces"]
 
@@ -46,7 +47,7 @@ def whole_faces(vertices: np.ndarray, faces: list[np.ndarray], max_size: float |
 def _decide(poly: np.ndarray, max_size: float | None) -> tuple[np.ndarray, np.ndarray]:
     k = poly.shape[1]
     size = (poly.max(axis=1) - poly.min(axis=1)).max(axis=1)  # np.ptp(poly, axis=0).max()
-    normal = _newell(poly)
+    normal = vector_areas(poly)
     area = np.sqrt((normal * normal).sum(axis=1))
     floor = _tol.DEGENERATE_REL * 1e2 * size**2  # as in subdivide_faces
     verdict = np.full(len(poly), PER_FACE, np.int8)
@@ -70,23 +71,6 @@ def _decide(poly: np.ndarray, max_size: float | None) -> tuple[np.ndarray, np.nd
             whole &= length / max_size - 1e-9 < 1.0 - _MARGIN
     verdict[whole] = WHOLE
     return verdict, cell
-
-
-def _newell(poly: np.ndarray) -> np.ndarray:
-    """``patches._newell_small`` on (m, k, 3) arrays, the same operations in the same order."""
-    k = poly.shape[1]
-    mean = poly[:, 0].copy()
-    for v in range(1, k):
-        mean += poly[:, v]
-    mean /= k
-    a = poly - mean[:, None]
-    out = np.zeros((len(poly), 3))
-    for i in range(k):
-        p, q = a[:, i], a[:, (i + 1) % k]
-        out[:, 0] += p[:, 1] * q[:, 2] - p[:, 2] * q[:, 1]
-        out[:, 1] += p[:, 2] * q[:, 0] - p[:, 0] * q[:, 2]
-        out[:, 2] += p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0]
-    return 0.5 * out
 
 
 def _convex(poly: np.ndarray, unit: np.ndarray) -> np.ndarray:

@@ -10,7 +10,59 @@ import numpy as np
 
 from . import _tol
 
-__all__ = ["polygon_normals", "centroids_and_areas", "triangulate"]
+__all__ = ["vector_area", "vector_areas", "polygon_normals", "centroids_and_areas", "triangulate"]
+
+
+def vector_areas(polys: np.ndarray) -> np.ndarray:
+    """Vector areas (Newell) of polygons (..., k, 3): half the sum of cross products of
+    consecutive corners, centred first so huge coordinates do not cancel catastrophically.
+
+    The one Newell sum of the package: :func:`vector_area` (one polygon, written out for speed)
+    and the earlier copies in ``patches``, ``_patches_bulk``, ``io/view3d`` gave these same bits
+    (same products and differences, sums in the same order).
+    """
+    centred = polys - polys.mean(axis=-2, keepdims=True)
+    return 0.5 * np.cross(centred, np.roll(centred, -1, axis=-2)).sum(axis=-2)
+
+
+def vector_area(poly: np.ndarray) -> np.ndarray:
+    """:func:`vector_areas` of one polygon (k, 3), the same bits.
+
+    Written out rather than with ``np.cross`` / ``np.roll``, whose per-call overhead dominated
+    loading large scenes (it is called a few times per face).
+    """
+    if len(poly) <= 8:
+        return _vector_area_small(poly)
+    a = poly - poly.mean(axis=0)
+    b = np.concatenate([a[1:], a[:1]])
+    cross = np.empty_like(a)
+    cross[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    cross[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    cross[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return 0.5 * cross.sum(axis=0)
+
+
+def _vector_area_small(poly: np.ndarray) -> np.ndarray:
+    """:func:`vector_area` in Python floats for a few corners (numpy's per-call cost is most of
+    it there): numpy reduces axis 0 row after row, so these sums run in the same order."""
+    rows = poly.tolist()
+    k = len(rows)
+    mx, my, mz = rows[0]
+    for x, y, z in rows[1:]:
+        mx += x
+        my += y
+        mz += z
+    mx, my, mz = mx / k, my / k, mz / k
+    a = [(x - mx, y - my, z - mz) for x, y, z in rows]
+    (ax, ay, az), (bx, by, bz) = a[0], a[1]
+    sx, sy, sz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+    for i in range(1, k):
+        ax, ay, az = a[i]
+        bx, by, bz = a[(i + 1) % k]
+        sx += ay * bz - az * by
+        sy += az * bx - ax * bz
+        sz += ax * by - ay * bx
+    return np.array([0.5 * sx, 0.5 * sy, 0.5 * sz])
 
 
 def polygon_normals(polys: np.ndarray) -> np.ndarray:
@@ -21,13 +73,12 @@ def polygon_normals(polys: np.ndarray) -> np.ndarray:
     polys : (..., k, 3) float
         Polygons, repeated vertices allowed.
     """
-    # Centre first so huge coordinates do not cancel catastrophically.
     centred = polys - polys.mean(axis=-2, keepdims=True)
-    vector_area = 0.5 * np.cross(centred, np.roll(centred, -1, axis=-2)).sum(axis=-2)
-    length = np.linalg.norm(vector_area, axis=-1, keepdims=True)
+    area = vector_areas(polys)
+    length = np.linalg.norm(area, axis=-1, keepdims=True)
     scale = (np.linalg.norm(centred, axis=-1).max(axis=-1, keepdims=True)) ** 2
     ok = length > _tol.DEGENERATE_REL * np.maximum(scale, np.finfo(float).tiny)
-    return np.where(ok, vector_area / np.where(ok, length, 1.0), 0.0)
+    return np.where(ok, area / np.where(ok, length, 1.0), 0.0)
 
 
 def centroids_and_areas(quads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -58,7 +109,7 @@ def triangulate(polygon: np.ndarray) -> np.ndarray:
     if len(polygon) == 3:
         return polygon[None].copy()
     centred = polygon - polygon.mean(axis=0)
-    normal = np.cross(centred, np.roll(centred, -1, axis=0)).sum(axis=0)
+    normal = vector_area(polygon)  # half the old unscaled sum: the same argmax and signs below
     axis = int(np.argmax(np.abs(normal)))
     plane = np.delete(centred, axis, axis=1)
     rings = np.array([len(polygon)], dtype=np.uint32)

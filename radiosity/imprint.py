@@ -34,7 +34,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._errors import RadiosityWarning
-from .patches import FaceReport, Patches, _newell, planar_parts, subdivide_faces
+from .geometry import vector_area
+from .patches import FaceReport, Patches, planar_parts, subdivide_faces
 
 __all__ = ["Contact", "Imprinted", "imprint_faces", "subdivide_imprinted", "CONTACT_REL"]
 
@@ -200,7 +201,7 @@ def _make_parts(vertices: np.ndarray, faces: list[np.ndarray], face_object: np.n
             continue
         poly = vertices[face]
         size = float(np.ptp(poly, axis=0).max()) if len(poly) else 0.0
-        newell = _newell(poly)
+        newell = vector_area(poly)
         area = float(np.linalg.norm(newell))
         deviations.append(0.0)
         if not area > 1e-12 * size**2:
@@ -208,7 +209,7 @@ def _make_parts(vertices: np.ndarray, faces: list[np.ndarray], face_object: np.n
         pieces, deviation = planar_parts(poly, size)
         deviations[-1] = deviation
         for piece in pieces:
-            normal = _newell(piece)
+            normal = vector_area(piece)
             area = float(np.linalg.norm(normal))
             if not area > 1e-12 * size**2:
                 continue

@@ -2,11 +2,38 @@
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, fields, replace
 
+from ._errors import RadiosityWarning
 from ._validate import reject_unknown
 
-__all__ = ["Options", "PRESETS"]
+__all__ = ["Options", "PRESETS", "DEPRECATED_OPTIONS", "rename_deprecated"]
+
+# Old spellings of Options fields (docs/options.md): still accepted, with a RadiosityWarning.
+# "rtol" meant three things; the solver's is a relative residual, the visibility one is absolute.
+DEPRECATED_OPTIONS = {"rtol": "solver_rtol", "visibility_rtol": "visibility_atol"}
+
+
+def rename_deprecated(options: dict, what: str = "solve option", *, stacklevel: int = 3,
+                      aliases: dict[str, str] = DEPRECATED_OPTIONS) -> dict:
+    """``options`` with each deprecated name (a key of ``aliases``) replaced by its new one,
+    warning once per name.
+
+    Raises
+    ------
+    TypeError
+        An old name given together with its new one (which value was meant is unclear).
+    """
+    out = dict(options)
+    for old, new in aliases.items():
+        if old not in out:
+            continue
+        if new in out:
+            raise TypeError(f"{what} {old!r} is the old name of {new!r}; give only {new!r}")
+        warnings.warn(f"{what} {old!r} is deprecated; use {new!r}", RadiosityWarning, stacklevel=stacklevel)
+        out[new] = out.pop(old)
+    return out
 
 
 @dataclass(frozen=True)
@@ -29,16 +56,17 @@ class Options:
         (``visibility_samples**4`` rays per pair).
     visibility : {"auto", "rays", "exact"}
         Partly occluded pairs: adaptive stratified rays, exact shadow clipping, or exact only
-        where rays would likely miss by more than ``visibility_rtol``.
+        where rays would likely miss by more than ``visibility_atol``.
     visibility_max_samples : int
         Points per direction on each patch for pairs whose first-round rays disagree.
-    visibility_rtol : float
-        Absolute error per view factor that ``"auto"`` accepts from rays.
+    visibility_atol : float
+        Absolute error per view factor that ``"auto"`` accepts from rays (old name
+        ``visibility_rtol``, deprecated).
     formfactor_rtol : float
         Relative accuracy of each unoccluded form factor (adaptive quadrature per pair).
     solver : {"auto", "direct", "bicgstab", "gmres", "jacobi", "gauss-seidel", "progressive"}
-    rtol : float
-        Relative residual at which iterative solvers stop.
+    solver_rtol : float
+        Relative residual at which iterative solvers stop (old name ``rtol``, deprecated).
     cache : bool
         Reuse form factors stored on disk for the same geometry and accuracy settings.
     workers : int or None
@@ -66,10 +94,10 @@ class Options:
     visibility_samples: int = 2
     visibility: str = "auto"
     visibility_max_samples: int = 4
-    visibility_rtol: float = 1e-4
+    visibility_atol: float = 1e-4
     formfactor_rtol: float = 1e-4
     solver: str = "auto"
-    rtol: float = 1e-10
+    solver_rtol: float = 1e-10
     cache: bool = True
     progress: bool = False
     workers: int | None = None
@@ -84,16 +112,28 @@ class Options:
         """Options of a named preset with some fields replaced."""
         if preset not in PRESETS:
             raise TypeError(f"unknown preset {preset!r}; valid: {', '.join(PRESETS)}")
+        overrides = rename_deprecated(overrides, stacklevel=4)
         reject_unknown(overrides, [f.name for f in fields(cls)], "solve option")
         return replace(PRESETS[preset], **overrides)
+
+    # Read-only old names, for readers (the fill's FillSettings) not yet moved to the new ones.
+    @property
+    def visibility_rtol(self) -> float:
+        """Old name of :attr:`visibility_atol` (it is an absolute tolerance)."""
+        return self.visibility_atol
+
+    @property
+    def rtol(self) -> float:
+        """Old name of :attr:`solver_rtol`."""
+        return self.solver_rtol
 
 
 PRESETS = {
     "draft": Options(patch_size_rel=1 / 12, near_order=2, far_separation=2.0, visibility_samples=2,
-                     visibility="rays", visibility_max_samples=3, visibility_rtol=1e-3, formfactor_rtol=1e-3,
+                     visibility="rays", visibility_max_samples=3, visibility_atol=1e-3, formfactor_rtol=1e-3,
                      link_tolerance=1e-2, min_element_rel=1 / 50),
     "default": Options(),
     "fine": Options(patch_size_rel=1 / 35, near_order=4, far_separation=4.0, visibility_samples=3,
-                    visibility_max_samples=5, visibility_rtol=1e-5, formfactor_rtol=1e-6,
+                    visibility_max_samples=5, visibility_atol=1e-5, formfactor_rtol=1e-6,
                     link_tolerance=1e-3, min_element_rel=1 / 200),
 }

@@ -15,7 +15,7 @@ import numpy as np
 from . import _tol
 from ._ngon import GRADED_MIN_CORNERS, graded_pieces
 from ._patches_bulk import DEGENERATE, WHOLE, whole_faces
-from .geometry import centroids_and_areas, triangulate
+from .geometry import centroids_and_areas, triangulate, vector_area
 
 __all__ = ["Patches", "subdivide_faces"]
 
@@ -44,47 +44,6 @@ class FaceReport:
 
     degenerate: list[int]  # face indices dropped for zero area
     nonplanar: list[tuple[int, float]]  # (face index, deviation in metres), split into triangles
-
-
-def _newell(poly: np.ndarray) -> np.ndarray:
-    """Area vector (Newell): half the sum of cross products of consecutive centred corners.
-
-    Written out rather than with ``np.cross`` / ``np.roll``, whose per-call overhead dominated
-    loading large scenes (it is called a few times per face); the same products and
-    differences in the same order, so the same bits.
-    """
-    if len(poly) <= 8:
-        return _newell_small(poly)
-    a = poly - poly.mean(axis=0)
-    b = np.concatenate([a[1:], a[:1]])
-    cross = np.empty_like(a)
-    cross[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
-    cross[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
-    cross[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
-    return 0.5 * cross.sum(axis=0)
-
-
-def _newell_small(poly: np.ndarray) -> np.ndarray:
-    """:func:`_newell` in Python floats for a few corners (numpy's per-call cost is most of it
-    there): numpy reduces axis 0 row after row, so these sums run in the same order."""
-    rows = poly.tolist()
-    k = len(rows)
-    mx, my, mz = rows[0]
-    for x, y, z in rows[1:]:
-        mx += x
-        my += y
-        mz += z
-    mx, my, mz = mx / k, my / k, mz / k
-    a = [(x - mx, y - my, z - mz) for x, y, z in rows]
-    (ax, ay, az), (bx, by, bz) = a[0], a[1]
-    sx, sy, sz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
-    for i in range(1, k):
-        ax, ay, az = a[i]
-        bx, by, bz = a[(i + 1) % k]
-        sx += ay * bz - az * by
-        sy += az * bx - ax * bz
-        sz += ax * by - ay * bx
-    return np.array([0.5 * sx, 0.5 * sy, 0.5 * sz])
 
 
 def _is_convex(poly: np.ndarray, normal: np.ndarray) -> bool:
@@ -217,7 +176,7 @@ def planar_parts(poly: np.ndarray, size: float) -> tuple[list[np.ndarray], float
     """
     if len(poly) == 3:
         return [poly], 0.0
-    normal = _newell(poly)
+    normal = vector_area(poly)
     unit = normal / np.linalg.norm(normal)
     deviation = float(np.abs((poly - poly.mean(axis=0)) @ unit).max())
     if deviation > _tol.PLANAR_REL * size:
@@ -230,7 +189,7 @@ def _pieces(poly: np.ndarray, size: float) -> tuple[list[np.ndarray], float]:
     parts, deviation = planar_parts(poly, size)
     if deviation or len(poly) == 3:
         return parts, deviation
-    unit = _newell(poly)
+    unit = vector_area(poly)
     unit = unit / np.linalg.norm(unit)
     if len(poly) == 4 and _is_convex(poly, unit):
         return [poly], 0.0
@@ -288,7 +247,7 @@ def _face_cells(poly: np.ndarray, index: int, max_patch_size: float | None, repo
     """Cells of one face (None if it has zero area); notes it in ``report`` if it is degenerate
     or non-planar."""
     size = float(np.ptp(poly, axis=0).max())
-    area = float(np.linalg.norm(_newell(poly)))
+    area = float(np.linalg.norm(vector_area(poly)))
     if not area > _tol.DEGENERATE_REL * 1e2 * size**2:
         report.degenerate.append(index)
         return None

@@ -10,7 +10,10 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._validate import as_points, as_unit_vectors
+from .options import rename_deprecated
 from .scene import Scene
+
+_SENSOR_ALIAS = {"rtol": "sensor_rtol"}  # docs/options.md
 
 __all__ = ["Solution"]
 
@@ -95,7 +98,8 @@ class Solution:
         vertex_b = sums / np.maximum(wsum, 1e-300)[:, None]
         return vertices, faces, vertex_b
 
-    def irradiance(self, points, normals, *, rtol: float = 1e-3, samples: int | None = None) -> np.ndarray:
+    def irradiance(self, points, normals, *, sensor_rtol: float = 1e-3, samples: int | None = None,
+                   rtol: float | None = None) -> np.ndarray:
         """Irradiance H (m, 3) at receiver points, W/m^2, occlusion included (final gather).
 
         Every face shadows every point (faces on the scene's hull too, for points outside it),
@@ -108,12 +112,14 @@ class Solution:
             Receiver positions, metres (e.g. a sensor grid on a desk).
         normals : (m, 3) float
             Receiver normals (any non-zero length); only light arriving on their side counts.
-        rtol : float, default: 1e-3
+        sensor_rtol : float, default: 1e-3
             Bound on each value's relative error from shadows, per channel: partly occluded
-            sources whose contributions add up to less than ``2 rtol H`` are counted half
-            visible instead of clipped. 0 clips every shadow exactly.
+            sources whose contributions add up to less than ``2 sensor_rtol H`` are counted half
+            visible instead of clipped. 0 clips every shadow exactly. Same as ``--sensor-rtol``.
         samples : None
             Ignored (kept so older calls still run; shadows are exact, not sampled).
+        rtol : float, optional
+            Old name of ``sensor_rtol`` (deprecated, warns).
         """
         from .visibility import Visibility
         from .visibility._points import SensorGather
@@ -122,14 +128,16 @@ class Solution:
         normals = as_unit_vectors(normals, "normals")
         if len(points) != len(normals):
             raise ValueError(f"points and normals must have the same length, got {len(points)} and {len(normals)}")
-        if not (np.isfinite(rtol) and 0.0 <= rtol < 1.0):
-            raise ValueError(f"rtol must be in [0, 1), got {rtol!r}")
+        if rtol is not None:
+            sensor_rtol = rename_deprecated({"rtol": rtol}, "irradiance option", aliases=_SENSOR_ALIAS)["sensor_rtol"]
+        if not (np.isfinite(sensor_rtol) and 0.0 <= sensor_rtol < 1.0):
+            raise ValueError(f"sensor_rtol must be in [0, 1), got {sensor_rtol!r}")
         if self._sensors is None or not np.array_equal(self._sensors.radiosity, self.radiosity):
             scene = self.scene
             vis = Visibility(scene.patch_quads, scene.patch_normal, scene.patch_object, scene.scale)
             self._sensors = SensorGather(scene.patch_quads, scene.patch_normal, scene.patch_object, scene.scale,
                                          self.radiosity.copy(), inner=vis.occluders)
-        return self._sensors.irradiance(points, normals, rtol=rtol)
+        return self._sensors.irradiance(points, normals, rtol=sensor_rtol)
 
     def summary(self) -> dict[str, Any]:
         """Machine-readable summary (what ``summary.json`` holds)."""

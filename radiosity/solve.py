@@ -14,7 +14,7 @@ from . import _memory
 from ._errors import MemoryBudgetError, RadiosityWarning
 from .methods.uniform.assembly import FillSettings, FillStats, assemble
 from .methods.uniform.cache import FormFactorCache
-from .options import PRESETS, Options
+from .options import PRESETS, Options, rename_deprecated
 from .scene import Scene
 from .solution import Solution
 from .methods.uniform.system import SolverReport, energy_balance, gain_note, gaining_patches, solve_system
@@ -128,7 +128,7 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
         Ordered by time and by accuracy; see :data:`radiosity.options.PRESETS`.
     **overrides
         Any field of :class:`radiosity.options.Options` (``max_patch_size``,
-        ``near_order``, ``visibility_samples``, ``solver``, ``rtol``, ``cache``, ...).
+        ``near_order``, ``visibility_samples``, ``solver``, ``solver_rtol``, ``cache``, ...).
         ``method="hierarchical"`` solves by hierarchical radiosity instead of the uniform
         fill (:mod:`radiosity.methods.hierarchical`); ``Solution.scene`` is then its leaves.
 
@@ -169,12 +169,12 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     _memory.check_solve(F.shape[0], F.nnz, options.solver)
     t0 = time.perf_counter()
     radiosity, report = solve_system(F, cut.reflectance, cut.emission, cut.patch_area,
-                                     method=options.solver, rtol=options.rtol)
+                                     method=options.solver, rtol=options.solver_rtol)
     timings = dict(prepared.timings)
     timings["solve"] = time.perf_counter() - t0
     balance = energy_balance(F, cut.patch_area, cut.reflectance, cut.emission, radiosity)
     gaining = gaining_patches(F, cut.patch_area, radiosity, cut.patch_object, cut.objects)
-    note = gain_note(balance, gaining, options.formfactor_rtol + options.visibility_rtol)
+    note = gain_note(balance, gaining, options.formfactor_rtol + options.visibility_atol)
     if note is not None:  # rows above 1: say where, so the user can look
         warnings.warn(note, RadiosityWarning, stacklevel=2)
     return Solution(scene=cut, radiosity=radiosity, F=F, options=options, timings=timings,
@@ -219,7 +219,7 @@ def _solve_out_of_core(cut, options, refusal: MemoryBudgetError, timings: dict[s
     timings["visibility"] = stats.seconds_visibility
     t0 = time.perf_counter()
     # The fill leaves out the pairs of inactive patches: their rows and columns are already zero.
-    radiosity, info = solve_shards(F, cut.reflectance, cut.emission, method=options.solver, rtol=options.rtol)
+    radiosity, info = solve_shards(F, cut.reflectance, cut.emission, method=options.solver, rtol=options.solver_rtol)
     radiosity[inactive] = cut.emission[inactive]
     timings["solve"] = time.perf_counter() - t0
     report = SolverReport(f"{info['method']} over the shards", [info["iterations"]] * 3, info["residual"],
@@ -274,8 +274,9 @@ ENFORCE = ("none", "reciprocity", "closure", "auto")
 def _view_factor_options(preset: str, overrides: dict) -> Options:
     """The options of a view-factor fill (tighter than a solve's; no cut unless asked)."""
     # The matrix is the product here: each factor to 1e-6 (or tighter) unless asked; partly
-    # occluded pairs then take exact shadow clipping ("auto" with visibility_rtol 1e-6).
-    tight = {"formfactor_rtol": 1e-6, "visibility_rtol": 1e-6}
+    # occluded pairs then take exact shadow clipping ("auto" with visibility_atol 1e-6).
+    tight = {"formfactor_rtol": 1e-6, "visibility_atol": 1e-6}
+    overrides = rename_deprecated(overrides, "view-factor option", stacklevel=5)
     if preset in PRESETS:
         tight = {k: min(v, getattr(PRESETS[preset], k)) for k, v in tight.items()}
     overrides = {**tight, **overrides}
@@ -321,7 +322,7 @@ def write_view_factors(scene: Scene, path, *, preset: str = "default", pairs_per
         with cluster_client(options.workers, options.scheduler) as client:
             F, _ = write_shards(problem, cut, path, client=client, pairs_per_block=pairs_per_block, progress=update,
                                 settings={"preset": preset, "formfactor_rtol": options.formfactor_rtol,
-                                          "visibility_rtol": options.visibility_rtol})
+                                          "visibility_rtol": options.visibility_atol})  # file key kept
     finally:
         close()
     return F
@@ -360,9 +361,9 @@ def compute_view_factors(scene: Scene, *, preset: str = "default", enforce: str 
     active = ~_inactive(cut)
     F = _without(prepared.F, ~active)
     settings = {"preset": preset, "formfactor_rtol": options.formfactor_rtol,
-                "visibility_rtol": options.visibility_rtol}
+                "visibility_rtol": options.visibility_atol}  # file key kept
     if enforce == "closure" and not force:
-        check_closed(F, active, options.formfactor_rtol + options.visibility_rtol, names=cut.objects,
+        check_closed(F, active, options.formfactor_rtol + options.visibility_atol, names=cut.objects,
                      patch_object=cut.patch_object)
     if enforce != "none" and active.any():
         keep = np.flatnonzero(active)
@@ -399,7 +400,7 @@ def view_factors(scene: Scene, *, preset: str = "default", enforce: str = "none"
         :class:`radiosity.enclosure.NotClosedError`.
     **overrides
         Fields of :class:`radiosity.options.Options`; ``formfactor_rtol`` and
-        ``visibility_rtol`` default to 1e-6 here (each factor to about six digits, partly
+        ``visibility_atol`` default to 1e-6 here (each factor to about six digits, partly
         occluded pairs by exact shadow clipping), tighter than :func:`solve` needs.
 
     Examples

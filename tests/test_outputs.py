@@ -139,8 +139,10 @@ def test_summary_records_the_run(solved):
     assert s["preset"] == "draft" and s["units"] == "m" and s["emission_mode"] == "radiance"
     assert s["options"]["solver"] == "auto" and s["options"]["no_picture"] is True
     assert s["options"]["points"].endswith("points.txt")
-    assert s["solver_options"] == {k: (v if not isinstance(v, float) or np.isfinite(v) else str(v))
-                                   for k, v in radiosity.Options.from_preset("draft").__dict__.items()}
+    draft = radiosity.Options.from_preset("draft")
+    expected = {k: (v if not isinstance(v, float) or np.isfinite(v) else str(v)) for k, v in draft.__dict__.items()}
+    expected.update(rtol=draft.solver_rtol, visibility_rtol=draft.visibility_atol)  # the old keys stay
+    assert s["solver_options"] == expected
     assert s["exposure"] > 0 and "sRGB" in s["tone_map"] and "98th percentile" in s["tone_map"]
     assert set(s["timings_s"]) >= {"patches", "form factors", "visibility", "solve"}
     assert s["compile_s"] >= 0 and "compile" in s["compile_note"]

@@ -33,6 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import _tol
+from ..geometry import vector_areas
 
 __all__ = ["receiver_frame", "image_plane", "image_plane_clipped", "clip_error_bound",
            "radius_for_error", "vertex_lambert", "homogeneous"]
@@ -82,7 +83,7 @@ def _in_source_plane(rel: np.ndarray) -> np.ndarray:
     receiver, relative to the source's distance, below ``_tol.IN_PLANE_REL``.
     """
     centred = rel - rel.mean(axis=1, keepdims=True)
-    area_vec = 0.5 * np.cross(centred, np.roll(centred, -1, axis=1)).sum(axis=1)
+    area_vec = vector_areas(rel)
     length = np.linalg.norm(area_vec, axis=1)
     scale = (np.linalg.norm(centred, axis=2).max(axis=1)) ** 2
     ok = length > _tol.DEGENERATE_REL * np.maximum(scale, np.finfo(float).tiny)

@@ -65,7 +65,9 @@ def load(args):
         options["imprint"] = False
     if args.units is not None:
         options["units"] = args.units
-    return load_scene(path, emission=args.emission, **options)
+    # One door for the patch size: the scene is cut as it is loaded (as in Python, where
+    # load_scene(max_patch_size=...) is the documented way); solve then keeps those patches.
+    return load_scene(path, max_patch_size=args.max_patch_size, emission=args.emission, **options)
 
 
 def unit_scale(args) -> float:
@@ -75,7 +77,5 @@ def unit_scale(args) -> float:
 
 
 def overrides(args) -> dict:
-    out = {"cache": not args.no_cache}
-    if args.max_patch_size is not None:
-        out["max_patch_size"] = args.max_patch_size
-    return out
+    """Options of ``solve``/``view_factors`` from the flags (the patch size went to ``load``)."""
+    return {"cache": not args.no_cache}

@@ -45,7 +45,11 @@ def run_record(args, solution, *, exposure: float, load_seconds: float, compile_
     tone map, timings and compile time."""
     from .. import __version__
 
+    from ..options import DEPRECATED_OPTIONS
+
     options = asdict(solution.options) if solution.options is not None else {}
+    if options:  # the old names too, for readers of earlier summaries (docs/options.md)
+        options.update({old: options[new] for old, new in DEPRECATED_OPTIONS.items()})
     return {
         "version": __version__,
         "python": platform.python_version(),

@@ -234,7 +234,7 @@ def run(args) -> int:
         check_free_space(out, output_bytes(solution.scene.n_patches, 0 if points is None else len(points)))
         h = None
         if points is not None:
-            h = solution.irradiance(points[:, :3] * to_metres, points[:, 3:], rtol=args.sensor_rtol)
+            h = solution.irradiance(points[:, :3] * to_metres, points[:, 3:], sensor_rtol=args.sensor_rtol)
         summary = solution.summary()
         write_vtp(solution, stage / "solution.vtp")
         write_ply(solution, stage / "solution.ply")

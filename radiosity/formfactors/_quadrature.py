@@ -8,17 +8,16 @@ weights serves both shapes.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from functools import lru_cache
 
 import numba as _numba
 import numpy as np
 
-from ..geometry import centroids_and_areas, polygon_normals, triangulate
+from ..geometry import centroids_and_areas, polygon_normals
 from ._closed_form import _MODES, _clip_to_upper
 from ._lambert import _quadrature_kernel, _quadrature_source_kernel
 
-__all__ = ["patch_points", "integrate_over_polygon"]
+__all__ = ["patch_points"]
 
 
 @lru_cache(maxsize=None)
@@ -48,52 +47,6 @@ def patch_points(quads: np.ndarray, order: int) -> tuple[np.ndarray, np.ndarray]
         centroid, area = centroids_and_areas(quads)
         return centroid[:, None, :], area[:, None]
     return split_patch_points(quads, order, 1)
-
-
-def split_triangles(tris: np.ndarray) -> np.ndarray:
-    """Split each triangle (t, 3, 3) into four by its edge midpoints."""
-    a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
-    ab, bc, ca = (a + b) / 2, (b + c) / 2, (c + a) / 2
-    parts = [np.stack(p, axis=1) for p in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))]
-    return np.concatenate(parts, axis=0)
-
-
-def integrate_over_polygon(
-    integrand: Callable[[np.ndarray], np.ndarray],
-    polygon: np.ndarray,
-    *,
-    rtol: float,
-    max_points: int = 4_000_000,
-) -> float:
-    """Adaptive integral of ``integrand(points) -> values`` over a planar polygon.
-
-    The estimate sequence raises the Gauss order (4, 8, 16) and then splits the triangles in
-    four at order 16, until two successive estimates agree to ``rtol`` relative (or to
-    ``rtol * 1e-3`` absolute, for integrals that are essentially zero). Each estimate is far
-    more accurate than the one before, so the returned (last) one is conservative.
-    """
-    tris = triangulate(polygon)
-    if len(tris) == 0:
-        return 0.0
-    quads = np.concatenate([tris, tris[:, 2:3]], axis=1)
-    area = float(centroids_and_areas(quads)[1].sum())
-    if area == 0.0:
-        return 0.0
-    previous = None
-    for order, splits in ((4, 0), (8, 0), (16, 0), (16, 1), (16, 2), (16, 3), (16, 4), (16, 5)):
-        parts = tris
-        for _ in range(splits):
-            parts = split_triangles(parts)
-        if len(parts) * order**2 > max_points:
-            break
-        quads = np.concatenate([parts, parts[:, 2:3]], axis=1)
-        points, weights = patch_points(quads, order)
-        values = integrand(points.reshape(-1, 3)).reshape(weights.shape)
-        estimate = float((values * weights).sum()) / area
-        if previous is not None and abs(estimate - previous) <= max(rtol * abs(estimate), 1e-3 * rtol):
-            return estimate
-        previous = estimate
-    return previous
 
 
 def split_patch_points(quads: np.ndarray, order: int, splits: int) -> tuple[np.ndarray, np.ndarray]:

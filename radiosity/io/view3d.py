@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import SceneError
+from ..geometry import vector_area
 from ._text import decode, excerpt, parse_float, read_input, split_lines
 from .obj import MAX_COORDINATE
 
@@ -369,7 +370,7 @@ def separate_and_combine(model: View3DModel) -> SeparatedModel:
         if k not in children:
             faces.append(np.asarray(refs))
             face_surface.append(k)
-            areas[k] = float(np.linalg.norm(_newell(polygon)))
+            areas[k] = float(np.linalg.norm(vector_area(polygon)))
             continue
         pieces, areas[k] = _cut_out(model, k, children[k])
         for piece in pieces:
@@ -388,11 +389,6 @@ def separate_and_combine(model: View3DModel) -> SeparatedModel:
             objects.append(model.names[k])
     return SeparatedModel(np.concatenate(vertices), faces, np.asarray(face_surface, np.int64), objects,
                           surface_object, areas, notes)
-
-
-def _newell(polygon: np.ndarray) -> np.ndarray:
-    centred = polygon - polygon.mean(axis=0)
-    return 0.5 * np.cross(centred, np.roll(centred, -1, axis=0)).sum(axis=0)
 
 
 def _cut_out(model: View3DModel, k: int, subs: list[int]) -> tuple[list[np.ndarray], float]:
@@ -414,7 +410,7 @@ def _cut_out_pieces(model: View3DModel, k: int, subs: list[int]) -> tuple[list[n
     from ..imprint import convex_pieces
 
     base = model.vertices[model.surfaces[k]]
-    normal = _newell(base)
+    normal = vector_area(base)
     length = float(np.linalg.norm(normal))
     if not (math.isfinite(length) and length > 0):  # e.g. corners 1e-160 apart: the area underflows
         raise SceneError(f"{model.path}:{model.line[k]}: surface {k + 1} ({excerpt(model.names[k])}) has zero area "
@@ -442,7 +438,7 @@ def _cut_out_pieces(model: View3DModel, k: int, subs: list[int]) -> tuple[list[n
         if off > SUBSURFACE_PLANE_REL * radius:
             raise SceneError(f"{where}: subsurface {s + 1} ({model.names[s]}) is not in the plane of its base "
                              f"{k + 1} ({model.names[k]}): off by {off:.3g} m")
-        facing = _newell(corners)
+        facing = vector_area(corners)
         if facing @ normal < SUBSURFACE_FACING_COS * np.linalg.norm(facing):
             raise SceneError(f"{where}: subsurface {s + 1} ({model.names[s]}) must face the same way as its base "
                              f"{k + 1} ({model.names[k]}); list its vertices the other way round")
@@ -465,7 +461,7 @@ def _cut_out_pieces(model: View3DModel, k: int, subs: list[int]) -> tuple[list[n
             continue
         for xy in convex_pieces(polygon):
             pieces.append(origin + xy[:, :1] * u + xy[:, 1:2] * v)
-    return pieces, float(sum(np.linalg.norm(_newell(p)) for p in pieces))
+    return pieces, float(sum(np.linalg.norm(vector_area(p)) for p in pieces))
 
 
 def write_vs3(scene, path, *, title: str = "exported by radiosity") -> None:

@@ -24,7 +24,7 @@ import numpy as np
 
 from ._constants import MAX_UNION, SNAP_REL
 
-__all__ = ["clip_convex", "hidden_polygons", "hidden_factors", "point_factors", "union_factors"]
+__all__ = ["clip_convex", "hidden_factors", "point_factors", "union_factors"]
 
 
 def clip_convex(poly: np.ndarray, h: np.ndarray) -> np.ndarray:
@@ -50,60 +50,6 @@ def clip_convex(poly: np.ndarray, h: np.ndarray) -> np.ndarray:
     pad = np.arange(k + 1)[None, :] >= count[:, None]
     first = np.where(count[:, None] > 0, out[:, 0], poly[:, 0])
     return np.where(pad[..., None], first[:, None, :], out)
-
-
-def hidden_polygons(x: np.ndarray, source: np.ndarray, source_normal: np.ndarray,
-                    occluder: np.ndarray, occluder_normal: np.ndarray, tol: float) -> np.ndarray:
-    """Part of each source hidden from x by one convex occluder, as a padded polygon.
-
-    Parameters
-    ----------
-    x : (r, 3) float
-        Receiver points.
-    source : (r, 4, 3) float
-        Convex source patches (triangles repeat a vertex).
-    source_normal, occluder_normal : (r, 3) float
-        Unit normals.
-    occluder : (r, m, 3) float
-        Convex occluder polygons (padded by repeated vertices).
-    tol : float
-        Length below which a distance counts as zero (metres).
-
-    Returns
-    -------
-    (r, 4 + m + 2, 3) float
-        Hidden polygons in the source's plane; rows with nothing hidden have zero area.
-    """
-    r, m, _ = occluder.shape
-    centre = source.mean(axis=1)
-    side = np.einsum("rc,rc->r", x - centre, source_normal)
-    flip = np.where(side < 0, -1.0, 1.0)
-    nrm = source_normal * flip[:, None]
-    dx = np.abs(side)
-    # heights of the occluder's vertices above the source plane, towards x
-    height = np.einsum("rmc,rc->rm", occluder - centre[:, None, :], nrm)
-    k1 = clip_convex(occluder, height)
-    h1 = np.einsum("rmc,rc->rm", k1 - centre[:, None, :], nrm)
-    k2 = clip_convex(k1, dx[:, None] - h1)
-    # the cone from x over k2: one half-space per edge, oriented towards k2's vertex mean
-    rel = k2 - x[:, None, :]
-    planes = np.cross(rel, np.roll(rel, -1, axis=1))
-    inner = k2.mean(axis=1) - x
-    orient = np.einsum("rmc,rc->rm", planes, inner)
-    planes *= np.where(orient < 0, -1.0, 1.0)[..., None]
-    # a degenerate cone (x in the occluder's plane, or nothing left of it) hides nothing
-    apex = np.abs(np.einsum("rc,rc->r", x - occluder.mean(axis=1), occluder_normal))
-    centred = k2 - k2.mean(axis=1, keepdims=True)
-    area2 = np.linalg.norm(np.cross(centred, np.roll(centred, -1, axis=1)).sum(axis=1), axis=1)
-    size = np.linalg.norm(occluder - occluder.mean(axis=1, keepdims=True), axis=2).max(axis=1)
-    empty = (apex <= tol) | (area2 <= (tol * tol)) | (dx <= tol) | (size <= tol)
-    poly = source
-    for e in range(planes.shape[1]):
-        h = np.einsum("rkc,rc->rk", poly - x[:, None, :], planes[:, e])
-        # an edge of zero length has a zero plane: it keeps everything
-        poly = clip_convex(poly, h)
-    poly[empty] = poly[empty, :1]
-    return poly
 
 
 def union_factors(x: np.ndarray, nx: np.ndarray, group: np.ndarray, polys: np.ndarray,

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from ..geometry import centroids_and_areas
+from ..geometry import centroids_and_areas, vector_areas
 from ._constants import BVH_LEAF, CHUNK_TRIPLES, MAX_OCCLUDER_VERTICES, MERGE_AREA_REL, PLANE_REL
 
 __all__ = ["Occluders", "build_occluders", "FREE", "FULL", "MAYBE"]
@@ -121,8 +121,7 @@ def build_occluders(quads: np.ndarray, normals: np.ndarray, groups: np.ndarray, 
         zi = np.zeros(0, np.int64)
         return Occluders(np.zeros((0, 3, 3)), z, z, np.zeros((0, 3, 3)), z, z, z, z, zi, zi, zi, zi, zi)
     P = _pad(polys)
-    centred = P - P.mean(axis=1, keepdims=True)
-    normal = np.cross(centred, np.roll(centred, -1, axis=1)).sum(axis=1)
+    normal = vector_areas(P)  # half the old unscaled sum: the same bits once normalised
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
     center = np.stack([p.mean(axis=0) for p in polys])
     edge = np.roll(P, -1, axis=1) - P

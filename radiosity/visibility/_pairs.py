@@ -247,10 +247,6 @@ class Visibility:
             status[:] = MAYBE
         return status, rows, occ
 
-    def needs_rays(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
-        """(m,) bool: pairs that are partly occluded (neither free nor fully blocked)."""
-        return self.classify(i, j)[0] == MAYBE
-
     # ------------------------------------------------------------------ pair fractions
     def fraction(self, i: np.ndarray, j: np.ndarray, *, exact: bool = False, order: int = 2) -> np.ndarray:
         """(m,) visible fraction of each pair (i receives from j), kernel-weighted.

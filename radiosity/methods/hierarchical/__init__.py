@@ -141,7 +141,7 @@ def _alternate(hier: Hierarchy, options: Options, timings: dict, bar):
             hier.stats.converged = True
             break
         t = time.perf_counter()
-        B, K, leaves, report = hier.solve(options.rtol)
+        B, K, leaves, report = hier.solve(options.solver_rtol)
         solve_s += time.perf_counter() - t
     timings["hierarchy"] = refine_s
     timings["solve"] = solve_s

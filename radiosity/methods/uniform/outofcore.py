@@ -22,21 +22,12 @@ from ... import _memory
 from ..._errors import MemoryBudgetError, RadiosityError
 from .system import accepted_residual
 
-__all__ = ["fill_fits", "out_of_core_plan", "solve_shards", "OUT_OF_CORE_SOLVERS"]
+__all__ = ["out_of_core_plan", "solve_shards", "OUT_OF_CORE_SOLVERS"]
 
 # Solvers that need F only through F @ X; "auto" is gmres (one pass over the shards per iteration).
 OUT_OF_CORE_SOLVERS = ("auto", "gmres", "bicgstab", "jacobi")
 GMRES_RESTART = 60
 MAXITER = 1000
-
-
-def fill_fits(n_patches: int) -> bool:
-    """Whether the in-memory fill of ``n_patches`` fits the budget (its worst-case estimate)."""
-    try:
-        _memory.check_fill(n_patches)
-    except MemoryBudgetError:
-        return False
-    return True
 
 
 def out_of_core_plan(n_patches: int, refusal: MemoryBudgetError) -> int:
