@@ -122,16 +122,23 @@ def test_once_factors_near_pairs_go_to_pair_factors():
 
 
 @settings(max_examples=25, deadline=None)
-@given(n=st.integers(1, 40), density=st.floats(0.0, 1.0), seed=st.integers(0, 2**16))
-def test_rows_to_csr_is_scipys_matrix(n, density, seed):
+@given(n=st.integers(1, 40), density=st.floats(0.0, 1.0), seed=st.integers(0, 2**16),
+       shuffle=st.sampled_from(["all", "none", "some rows"]))
+def test_rows_to_csr_is_scipys_matrix(n, density, seed, shuffle):
     rng = np.random.default_rng(seed)
     dense = np.where(rng.random((n, n)) < density, rng.normal(size=(n, n)), 0.0)
-    i, j = np.nonzero(dense)
-    perm = rng.permutation(len(i))
+    i, j = np.nonzero(dense)  # row-major: every row's columns ascending (the sorted rows' shortcut)
+    if shuffle == "all":
+        perm = rng.permutation(len(i))
+    elif shuffle == "none":
+        perm = np.arange(len(i))
+    else:  # rows whose entries come reversed, among sorted ones
+        perm = np.lexsort((np.where(i % 2 == 1, -j, j), i))
     i, j = i[perm].astype(np.int64), j[perm].astype(np.int64)
     v = dense[i, j]
     mine, ref = rows_to_csr(i, j, v, n), sp.csr_matrix((v, (i, j)), shape=(n, n))
     for name in ("indptr", "indices", "data"):
         np.testing.assert_array_equal(getattr(mine, name), getattr(ref, name))
-    if len(i):  # a repeated entry: scipy sums, the fast path declines
+    if len(i):  # a repeated entry: scipy sums, the fast path declines (at the row's end or next to it)
         assert rows_to_csr(np.r_[i, i[:1]], np.r_[j, j[:1]], np.r_[v, v[:1]], n) is None
+        assert rows_to_csr(np.r_[i[:1], i], np.r_[j[:1], j], np.r_[v[:1], v], n) is None

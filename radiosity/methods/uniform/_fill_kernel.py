@@ -119,6 +119,15 @@ def _sort_rows(indptr, indices, data):
     ok = np.ones(len(indptr) - 1, np.bool_)
     for r in _prange(len(indptr) - 1):
         lo, hi = indptr[r], indptr[r + 1]
+        # the fill's rows mostly come sorted already (pairs listed by row, then their mirrors):
+        # one look instead of an argsort (a tenth of the open plates' fill)
+        ascending = True
+        for t in range(lo + 1, hi):
+            if indices[t] <= indices[t - 1]:
+                ascending = False
+                break
+        if ascending:
+            continue
         cols = indices[lo:hi]
         by_col = np.argsort(cols)
         indices[lo:hi] = cols[by_col]
@@ -409,7 +418,7 @@ _sort_rows = _TwoWays(_sort_rows, lambda indptr, indices, data: len(indices))
 _balanced = _numba.njit(cache=True, inline="always")(_balanced)
 _in_front = _numba.njit(cache=True, inline="always")(_in_front)
 _facing = _numba.njit(cache=True, inline="always")(_facing)
-_apriori_order = _numba.njit(cache=True, error_model="numpy")(_apriori_order)
+_apriori_order = _numba.njit(cache=True, inline="always", error_model="numpy")(_apriori_order)
 _count_pairs = _TwoWays(_count_pairs, lambda quads, *a: len(a[3]) * len(quads) // 2, error_model="numpy")
 _list_pairs = _TwoWays(_list_pairs, lambda *a: len(a[11]), error_model="numpy")
 _put_points = _numba.njit(cache=True, inline="always", error_model="numpy")(_put_points)
