@@ -12,7 +12,8 @@ from hypothesis import strategies as st
 from helpers import PARALLEL_SQUARES
 
 from radiosity import _tol
-from radiosity.methods.uniform._fill_kernel import block_pairs, once_factors, raw_ratio, reciprocal_pairs, rows_to_csr, separated_factors
+from radiosity.methods.uniform._fill_kernel import (block_pairs, mirrored, once_factors, raw_ratio, reciprocal_pairs,
+                                                   rows_to_csr, separated_factors)
 from radiosity.methods.uniform.assembly import FillSettings, assemble, candidate_pairs
 from radiosity.formfactors._closed_form import _MODES
 from radiosity.geometry import polygon_normals
@@ -122,16 +123,42 @@ def test_once_factors_near_pairs_go_to_pair_factors():
 
 
 @settings(max_examples=25, deadline=None)
-@given(n=st.integers(1, 40), density=st.floats(0.0, 1.0), seed=st.integers(0, 2**16))
-def test_rows_to_csr_is_scipys_matrix(n, density, seed):
+@given(n=st.integers(1, 40), density=st.floats(0.0, 1.0), seed=st.integers(0, 2**16),
+       shuffle=st.sampled_from(["all", "none", "some rows"]))
+def test_rows_to_csr_is_scipys_matrix(n, density, seed, shuffle):
     rng = np.random.default_rng(seed)
     dense = np.where(rng.random((n, n)) < density, rng.normal(size=(n, n)), 0.0)
-    i, j = np.nonzero(dense)
-    perm = rng.permutation(len(i))
+    i, j = np.nonzero(dense)  # row-major: every row's columns ascending (the sorted rows' shortcut)
+    if shuffle == "all":
+        perm = rng.permutation(len(i))
+    elif shuffle == "none":
+        perm = np.arange(len(i))
+    else:  # rows whose entries come reversed, among sorted ones
+        perm = np.lexsort((np.where(i % 2 == 1, -j, j), i))
     i, j = i[perm].astype(np.int64), j[perm].astype(np.int64)
     v = dense[i, j]
     mine, ref = rows_to_csr(i, j, v, n), sp.csr_matrix((v, (i, j)), shape=(n, n))
     for name in ("indptr", "indices", "data"):
         np.testing.assert_array_equal(getattr(mine, name), getattr(ref, name))
-    if len(i):  # a repeated entry: scipy sums, the fast path declines
+    if len(i):  # a repeated entry: scipy sums, the fast path declines (at the row's end or next to it)
         assert rows_to_csr(np.r_[i, i[:1]], np.r_[j, j[:1]], np.r_[v, v[:1]], n) is None
+        assert rows_to_csr(np.r_[i[:1], i], np.r_[j[:1], j], np.r_[v[:1], v], n) is None
+
+
+@settings(max_examples=25, deadline=None)
+@given(n=st.integers(1, 30), m=st.integers(0, 200), seed=st.integers(0, 2**16), drop=st.sampled_from([0.0, 1e-3, 0.3]))
+def test_mirrored_is_the_concatenated_mirror(n, m, seed, drop):
+    # the reference: fill_block's former numpy passes (concatenate both directions, mask > drop)
+    rng = np.random.default_rng(seed)
+    area = np.where(rng.random(n) < 0.1, 0.0, rng.random(n))
+    i, j = rng.integers(0, n, m), rng.integers(0, n, m)
+    f = np.where(rng.random(m) < 0.2, 0.0, rng.random(m))
+    ratio = np.divide(area[i], area[j], out=np.zeros(m), where=area[j] > 0)
+    ri, rj, rv = np.concatenate([i, j]), np.concatenate([j, i]), np.concatenate([f, f * ratio])
+    keep = rv > drop
+    got_i, got_j, got_v, dropped = mirrored(area, i, j, f, drop)
+    np.testing.assert_array_equal(got_i, ri[keep])
+    np.testing.assert_array_equal(got_j, rj[keep])
+    np.testing.assert_array_equal(got_v, rv[keep])  # bit for bit
+    assert got_i.dtype == got_j.dtype == np.int64
+    assert dropped == pytest.approx(float((rv[~keep] * area[ri[~keep]]).sum()), rel=1e-12, abs=1e-300)

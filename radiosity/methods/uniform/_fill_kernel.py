@@ -26,7 +26,7 @@ import numpy as np
 from ...formfactors import _quadrature as quadrature
 from ...formfactors._lambert import _G_SIZE, _SRC_LANES, _source_block
 
-__all__ = ["block_pairs", "reciprocal_pairs", "rows_to_csr", "once_factors", "raw_ratio", "separated_factors", "MAX_ORDER"]
+__all__ = ["block_pairs", "reciprocal_pairs", "mirrored", "rows_to_csr", "once_factors", "raw_ratio", "separated_factors", "MAX_ORDER"]
 
 _prange = _numba.prange  # the loops below are compiled with parallel=True (see _TwoWays)
 MAX_ORDER = max(quadrature._APRIORI_ORDERS)
@@ -79,6 +79,62 @@ def block_pairs(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, ar
     return rec, src, order
 
 
+def mirrored(area: np.ndarray, i: np.ndarray, j: np.ndarray, f: np.ndarray, drop: float
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """The computed factors F(i -> j) and their mirrors F(j -> i) = A_i F(i -> j) / A_j (0 where
+    A_j = 0), those above ``drop`` kept, in one compiled pass.
+
+    The same entries in the same order as concatenating (i, j, f) and (j, i, f A_i / A_j) and
+    masking ``> drop`` (test), without the three concatenations, the ratio array and the mask
+    (a tenth of the open plates' fill).
+
+    Returns
+    -------
+    i, j : (k,) int64
+        Receiver and source of each kept factor: the computed ones first, then the mirrors.
+    v : (k,) float
+        The factors.
+    dropped : float
+        Sum of A_receiver F over the factors left out.
+    """
+    i, j = np.asarray(i, np.int64), np.asarray(j, np.int64)
+    f, area = np.asarray(f, float), np.asarray(area, float)
+    kept = _count_kept(area, i, j, f, float(drop))
+    out_i, out_j, out_v = np.empty(kept, np.int64), np.empty(kept, np.int64), np.empty(kept)
+    dropped = _write_mirrored(area, i, j, f, float(drop), out_i, out_j, out_v)
+    return out_i, out_j, out_v, float(dropped)
+
+
+def _mirror_value(area, a, b, fab):
+    return fab * (area[a] / area[b]) if area[b] > 0 else 0.0
+
+
+def _count_kept(area, i, j, f, drop):
+    kept = 0
+    for t in range(len(i)):
+        kept += (f[t] > drop) + (_mirror_value(area, i[t], j[t], f[t]) > drop)
+    return kept
+
+
+def _write_mirrored(area, i, j, f, drop, out_i, out_j, out_v):
+    k = 0
+    dropped = 0.0
+    for t in range(len(i)):
+        if f[t] > drop:
+            out_i[k], out_j[k], out_v[k] = i[t], j[t], f[t]
+            k += 1
+        else:
+            dropped += f[t] * area[i[t]]
+    for t in range(len(i)):
+        v = _mirror_value(area, i[t], j[t], f[t])
+        if v > drop:
+            out_i[k], out_j[k], out_v[k] = j[t], i[t], v
+            k += 1
+        else:
+            dropped += v * area[j[t]]
+    return dropped
+
+
 def rows_to_csr(i: np.ndarray, j: np.ndarray, v: np.ndarray, n: int):
     """``scipy.sparse.csr_matrix((v, (i, j)), shape=(n, n))`` for entries without duplicates, in
     two compiled passes (a counting scatter by row, a sort of each row's columns) instead of
@@ -119,6 +175,15 @@ def _sort_rows(indptr, indices, data):
     ok = np.ones(len(indptr) - 1, np.bool_)
     for r in _prange(len(indptr) - 1):
         lo, hi = indptr[r], indptr[r + 1]
+        # the fill's rows mostly come sorted already (pairs listed by row, then their mirrors):
+        # one look instead of an argsort (a tenth of the open plates' fill)
+        ascending = True
+        for t in range(lo + 1, hi):
+            if indices[t] <= indices[t - 1]:
+                ascending = False
+                break
+        if ascending:
+            continue
         cols = indices[lo:hi]
         by_col = np.argsort(cols)
         indices[lo:hi] = cols[by_col]
@@ -405,11 +470,14 @@ class _TwoWays:
 # The plain functions above are compiled here (the serial and parallel builds of _TwoWays).
 _task_starts = _numba.njit(cache=True)(_task_starts)
 _scatter_rows = _numba.njit(cache=True)(_scatter_rows)
+_mirror_value = _numba.njit(cache=True, inline="always")(_mirror_value)
+_count_kept = _numba.njit(cache=True)(_count_kept)
+_write_mirrored = _numba.njit(cache=True)(_write_mirrored)
 _sort_rows = _TwoWays(_sort_rows, lambda indptr, indices, data: len(indices))
 _balanced = _numba.njit(cache=True, inline="always")(_balanced)
 _in_front = _numba.njit(cache=True, inline="always")(_in_front)
 _facing = _numba.njit(cache=True, inline="always")(_facing)
-_apriori_order = _numba.njit(cache=True, error_model="numpy")(_apriori_order)
+_apriori_order = _numba.njit(cache=True, inline="always", error_model="numpy")(_apriori_order)
 _count_pairs = _TwoWays(_count_pairs, lambda quads, *a: len(a[3]) * len(quads) // 2, error_model="numpy")
 _list_pairs = _TwoWays(_list_pairs, lambda *a: len(a[11]), error_model="numpy")
 _put_points = _numba.njit(cache=True, inline="always", error_model="numpy")(_put_points)

@@ -19,7 +19,7 @@ from ... import _tol
 from ..._memory import FILL_PAIRS
 from ...options import Options
 from ...formfactors import pair_factors
-from ._fill_kernel import block_pairs, once_factors, rows_to_csr
+from ._fill_kernel import block_pairs, mirrored, once_factors, rows_to_csr
 
 __all__ = ["FillSettings", "FillStats", "candidate_pairs", "unoccluded_factors", "fill_block", "assemble"]
 
@@ -271,14 +271,10 @@ def fill_block(quads, normals, centroid, area, visibility, settings: FillSetting
             setattr(stats, name, 2 * getattr(stats, name))
         stats.seconds_visibility += time.perf_counter() - t1
         stats.n_rays = visibility.n_rays - rays_before
-    ratio = np.divide(area[i], area[j], out=np.zeros(len(i)), where=area[j] > 0)  # A_j >= A_i
-    i, j, f = np.concatenate([i, j]), np.concatenate([j, i]), np.concatenate([f, f * ratio])
-    keep = f > _tol.DROP_FACTOR
-    stats.n_pairs += len(i)
-    if keep.all():
-        return i.astype(np.int64, copy=False), j.astype(np.int64, copy=False), f, stats
-    stats.dropped_mass += float((f[~keep] * area[i[~keep]]).sum())
-    return i[keep].astype(np.int64, copy=False), j[keep].astype(np.int64, copy=False), f[keep], stats
+    stats.n_pairs += 2 * len(i)
+    i, j, f, dropped = mirrored(area, i, j, f, _tol.DROP_FACTOR)  # F(j -> i) = A_i F(i -> j) / A_j, A_j >= A_i
+    stats.dropped_mass += dropped
+    return i, j, f, stats
 
 
 def add_stats(total: FillStats, part: FillStats) -> None:
