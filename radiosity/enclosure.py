@@ -23,7 +23,7 @@ from ._errors import RadiosityError, RadiosityWarning
 __all__ = ["Diagnostics", "diagnose", "enforce_reciprocity", "check_closed", "NotClosedError", "CLOSURE_SLACK"]
 
 # Closure is refused where a row misses 1 by more than this many times the fill's requested
-# tolerance (formfactor_rtol + visibility_rtol): a row sums about n_j entries, each within its
+# tolerance (formfactor_rtol + visibility_atol): a row sums about n_j entries, each within its
 # tolerance, and the errors of a closed room's rows stay well below 10 x that sum in practice.
 CLOSURE_SLACK = 10.0
 
@@ -127,7 +127,7 @@ def check_closed(F: sp.spmatrix, active: np.ndarray, rtol: float, *, names=None,
     active : (n,) bool
         Rows to check (obstructions and hidden patches have none).
     rtol : float
-        The fill's tolerance (``formfactor_rtol + visibility_rtol``).
+        The fill's tolerance (``formfactor_rtol + visibility_atol``).
 
     Returns
     -------

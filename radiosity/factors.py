@@ -123,7 +123,7 @@ class ViewFactors:
     enforced : {"none", "reciprocity", "closure"}
         What was enforced on F.
     settings : dict
-        Fill tolerances (``formfactor_rtol``, ``visibility_rtol``) and the preset.
+        Fill tolerances (``formfactor_rtol``, ``visibility_rtol``, the file key of ``visibility_atol``) and the preset.
     """
 
     F: sp.csr_matrix

@@ -228,7 +228,7 @@ def gain_note(energy: dict[str, list[float]], gaining: list[dict], tol: float = 
     """A note naming the patches that gain, when "escaped" is below ``-tol`` x emitted; else None.
 
     :func:`radiosity.solve` passes the fill's own tolerance (``formfactor_rtol +
-    visibility_rtol``): a closed cube at draft escapes -2.9e-7 of its power, which is the
+    visibility_atol``): a closed cube at draft escapes -2.9e-7 of its power, which is the
     quadrature's error, not news.
     """
     emitted = np.asarray(energy["emitted"], float)
@@ -238,4 +238,4 @@ def gain_note(energy: dict[str, list[float]], gaining: list[dict], tol: float = 
     worst = ", ".join(f"{g['object']} patch {g['patch']} (row sum 1{g['share'] - 1:+.1e})" for g in gaining[:5])
     share = float((-escaped / np.where(emitted > 0, emitted, 1.0)).max())
     return (f"energy balance: 'escaped' is negative ({share:.2e} of the emitted power): rows of F sum above 1, "
-            f"most at {worst}; a finer preset or tighter formfactor_rtol / visibility_rtol reduces it")
+            f"most at {worst}; a finer preset or tighter formfactor_rtol / visibility_atol reduces it")
