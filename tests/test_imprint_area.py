@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from radiosity.imprint import subdivide_imprinted
-from radiosity.patches import _newell
+from radiosity.geometry import vector_area as _newell
 
 # McGuire's Cornell-box floor (metres, y up, normal +y): slightly skewed, 4.06 m^2.
 FLOOR = np.array([[-1.01, 0, 0.99], [1, 0, 0.99], [1, 0, -1.04], [-0.99, 0, -1.04]])

@@ -17,7 +17,8 @@ from hypothesis import strategies as st
 import radiosity
 from radiosity.formfactors import polygon_to_polygon
 from radiosity.imprint import subdivide_imprinted
-from radiosity.patches import _newell, subdivide_faces
+from radiosity.geometry import vector_area as _newell
+from radiosity.patches import subdivide_faces
 from radiosity.geometry import triangulate
 
 from helpers import write_obj
