@@ -858,7 +858,7 @@ def fam_reciprocity(quick):
         fb = f.pair(f"#{t} b->a", b, a, ref * mp.mpf(Aa) / mp.mpf(Ab), 1e-10)
         worst_recip = max(worst_recip, abs(Aa * fa["ours"] - Ab * fb["ours"]) / (Aa * fa["ours"]))
     t0 = time.perf_counter()
-    straddle = 0
+    straddle, worst_recip_straddle = 0, 0.0
     while straddle < (5 if quick else 15):  # pairs crossing each other's planes: reciprocity only
         a = random_convex(rng) @ rotation(rng).T
         b = random_convex(rng) @ rotation(rng).T + 0.6 * rng.normal(size=3)
@@ -870,7 +870,7 @@ def fam_reciprocity(quick):
         fab, fba = polygon_to_polygon(a, b, rtol=1e-10), polygon_to_polygon(b, a, rtol=1e-10)
         if fab > 0 or fba > 0:
             r = abs(polygon_area(a) * fab - polygon_area(b) * fba) / max(polygon_area(a) * fab, polygon_area(b) * fba)
-            worst_recip_straddle = r if straddle == 0 else max(worst_recip_straddle, r)
+            worst_recip_straddle = max(worst_recip_straddle, r)
             straddle += 1
     f.seconds += time.perf_counter() - t0
     f.note = (f"{len(f.cases) // 2} random convex pairs, each in front of the other; worst reciprocity "
