@@ -97,3 +97,22 @@ def print_table(rows: list[dict], columns: list[str] | None = None, *, title: st
     print("  ".join(c.rjust(w) for c, w in zip(columns, widths)))
     for row in cells:
         print("  ".join(v.rjust(w) for v, w in zip(row, widths)))
+
+
+def plate_quads(n: int, blocked: bool):
+    """(2 n^2 [+ 1], 4, 3) quads of the benchmark plates: two unit squares 1 apart, each cut
+    n x n, the lower facing up, the upper facing down, and with ``blocked`` the centred
+    0.5 x 0.5 blocker midway (FIELD_NOTES' reference values)."""
+    import numpy as np
+
+    h = 1.0 / n
+    a, b = np.meshgrid(np.arange(n) * h, np.arange(n) * h, indexing="ij")
+    a, b = a.ravel(), b.ravel()
+    sq = np.stack([np.column_stack([a, b]), np.column_stack([a + h, b]), np.column_stack([a + h, b + h]),
+                   np.column_stack([a, b + h])], axis=1)
+    low = np.concatenate([sq, np.zeros(sq.shape[:2] + (1,))], axis=2)
+    up = np.concatenate([sq, np.ones(sq.shape[:2] + (1,))], axis=2)[:, ::-1]  # facing down
+    parts = [low, up]
+    if blocked:
+        parts.append(np.array([[[0.25, 0.25, 0.5], [0.75, 0.25, 0.5], [0.75, 0.75, 0.5], [0.25, 0.75, 0.5]]]))
+    return np.concatenate(parts)

@@ -40,7 +40,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from _common import parse_args, print_table, write_json  # noqa: E402
+from _common import parse_args, plate_quads, print_table, write_json  # noqa: E402
 
 EXACT = {"open": 0.19982489569838738, "blocked": 0.0995062946}
 # What each case is filled with: the accuracy we claim for it. Open: formfactor_rtol 1e-4 gives
@@ -52,18 +52,7 @@ VIEW3D_EPS = 1e-6
 
 def plates(n: int, blocked: bool) -> np.ndarray:
     """(2 n^2 [+ 1], 4, 3) quads: the lower plate facing up, the upper facing down, the blocker."""
-    h = 1.0 / n
-    a, b = np.meshgrid(np.arange(n) * h, np.arange(n) * h, indexing="ij")
-    a, b = a.ravel(), b.ravel()
-    sq = np.stack([np.column_stack([a, b]), np.column_stack([a + h, b]), np.column_stack([a + h, b + h]),
-                   np.column_stack([a, b + h])], axis=1)
-    low = np.concatenate([sq, np.zeros(sq.shape[:2] + (1,))], axis=2)
-    up = np.concatenate([sq, np.ones(sq.shape[:2] + (1,))], axis=2)[:, ::-1]
-    parts = [low, up]
-    if blocked:
-        parts.append(np.array([[[0.25, 0.25, 0.5], [0.75, 0.25, 0.5], [0.75, 0.75, 0.5], [0.25, 0.75, 0.5]]]))
-    return np.concatenate(parts)
-
+    return plate_quads(n, blocked)
 
 def write_model(quads: np.ndarray, n_obstructions: int, path: Path, eps: float) -> None:
     """A View3D model: one ``S`` surface per plate patch, ``O`` for the blocker, binary output."""

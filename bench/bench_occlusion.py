@@ -23,7 +23,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from _common import parse_args, print_table, write_json  # noqa: E402
+from _common import parse_args, plate_quads, print_table, write_json  # noqa: E402
 
 from radiosity.methods.uniform.assembly import FillSettings, assemble  # noqa: E402
 from radiosity.geometry import polygon_normals  # noqa: E402
@@ -43,15 +43,7 @@ MODES = {
 
 
 def plates(n: int) -> tuple[np.ndarray, np.ndarray]:
-    h = 1.0 / n
-    a, b = np.meshgrid(np.arange(n) * h, np.arange(n) * h, indexing="ij")
-    a, b = a.ravel(), b.ravel()
-    sq = np.stack([np.column_stack([a, b]), np.column_stack([a + h, b]), np.column_stack([a + h, b + h]),
-                   np.column_stack([a, b + h])], axis=1)
-    low = np.concatenate([sq, np.zeros(sq.shape[:2] + (1,))], axis=2)
-    up = np.concatenate([sq, np.ones(sq.shape[:2] + (1,))], axis=2)[:, ::-1]  # facing down
-    blocker = np.array([[[0.25, 0.25, 0.5], [0.75, 0.25, 0.5], [0.75, 0.75, 0.5], [0.25, 0.75, 0.5]]])
-    quads = np.concatenate([low, up, blocker])
+    quads = plate_quads(n, blocked=True)
     groups = np.r_[np.zeros(n * n, int), np.ones(n * n, int), 2]
     return quads, groups
 
