@@ -47,22 +47,102 @@ def exit_status(exc: BaseException) -> int:
     return EXIT_INTERRUPTED
 
 
+HELD_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class _SignalDeferral:
+    """Ctrl-C and SIGTERM noted instead of raised between :meth:`hold` and :meth:`release`.
+
+    Python runs signal handlers in the main thread between bytecodes, also inside ctypes
+    callbacks and C extensions' module initialisation, where an exception is swallowed or
+    crashes. Masking the signal does not help: the kernel hands a process-directed signal to
+    any thread that does not block it (numpy's BLAS and numba start several). So while held,
+    the handler only notes the signal; :meth:`release` puts the old handlers back and raises
+    what came meanwhile, in plain Python code. Nested holds count; only the main thread holds.
+    """
+
+    def __init__(self):
+        self._depth = 0
+        self._saved: dict[int, object] = {}
+        self._pending: list[int] = []
+
+    def _note(self, signum, frame):
+        if signum not in self._pending:
+            self._pending.append(signum)
+
+    def hold(self) -> None:
+        if threading.current_thread() is not threading.main_thread():
+            return
+        if self._depth == 0:
+            saved = {signum: signal.getsignal(signum) for signum in HELD_SIGNALS}
+            if any(handler is None for handler in saved.values()):  # set from C: cannot be put back
+                return
+            self._saved = saved
+            for signum in HELD_SIGNALS:
+                signal.signal(signum, self._note)
+        self._depth += 1
+
+    def release(self) -> None:
+        if threading.current_thread() is not threading.main_thread() or self._depth == 0:
+            return
+        self._depth -= 1
+        if self._depth == 0:
+            for signum, handler in self._saved.items():
+                signal.signal(signum, handler)
+            pending, self._pending = self._pending, []
+            for signum in pending:
+                signal.raise_signal(signum)
+
+
+_deferral = _SignalDeferral()
+
+
 @contextlib.contextmanager
 def signals_held():
-    """Hold SIGINT and SIGTERM back for the block; one that came meanwhile is handled after it.
+    """Hold SIGINT and SIGTERM back for the block; one that came meanwhile is raised after it.
 
     For imports of C extensions whose module initialisation crashes when a Python exception
-    interrupts it (VTK segfaulted when Ctrl-C landed inside ``import pyvista``). Only the main
-    thread can change the mask meaningfully, and not on every platform: elsewhere a no-op.
+    interrupts it (VTK segfaulted when Ctrl-C landed inside ``import pyvista``).
     """
-    held = {signal.SIGINT, signal.SIGTERM}
-    can_hold = hasattr(signal, "pthread_sigmask") and threading.current_thread() is threading.main_thread()
-    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held) if can_hold else None
+    _deferral.hold()
     try:
         yield
     finally:
-        if can_hold:
-            signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+        _deferral.release()
+
+
+class _HeldWhileCompiling:
+    """Holds signals (see :class:`_SignalDeferral`) while numba's compiler lock is taken.
+
+    numba compiles, and loads kernels from its disk cache, under one compiler lock, and LLVM
+    calls back into Python through ctypes meanwhile. A Ctrl-C raised inside such a callback
+    was swallowed by ctypes ("Exception ignored on calling ctypes callback function", with a
+    traceback) and the run went on with numba half-initialised.
+    """
+
+    def on_start(self, event) -> None:
+        _deferral.hold()
+
+    def on_end(self, event) -> None:
+        _deferral.release()
+
+
+_compile_listener = None
+
+
+def hold_signals_while_compiling() -> None:
+    """Register :class:`_HeldWhileCompiling` with numba (once per process; no-op without numba)."""
+    global _compile_listener
+    if _compile_listener is not None:
+        return
+    try:
+        from numba.core import event
+    except ImportError:
+        return
+    # numba accepts only subclasses of its Listener, which this module cannot import at load time
+    listener_class = type("HeldWhileCompiling", (_HeldWhileCompiling, event.Listener), {})
+    _compile_listener = listener_class()
+    event.register("numba:compiler_lock", _compile_listener)
 
 
 @contextlib.contextmanager
@@ -72,6 +152,8 @@ def guard_imports():
     if command:
         signal.signal(signal.SIGTERM, _raise_terminated)
     try:
+        if command:  # inside the try: it imports numba, seconds in which a Ctrl-C may come
+            hold_signals_while_compiling()
         yield
     except KeyboardInterrupt as exc:
         if not command:

@@ -72,3 +72,56 @@ def test_signals_at_random_moments_end_cleanly(tmp_path):
         for name, value in expected.items():
             np.testing.assert_allclose(again[name], value, rtol=1e-12)
     assert any(code != 0 for code in outcomes), outcomes  # the draw did interrupt something
+
+
+HELD_PROBE = """
+import signal
+from numba import njit
+from numba.core import event
+from radiosity._startup import hold_signals_while_compiling
+
+seen = []
+class Probe(event.Listener):
+    def on_start(self, ev):
+        seen.append(signal.getsignal(signal.SIGINT) is not signal.default_int_handler)
+    def on_end(self, ev):
+        pass
+
+hold_signals_while_compiling()
+hold_signals_while_compiling()  # once per process: a second call adds nothing
+event.register("numba:compiler_lock", Probe())
+njit(lambda x: x + 1)(1)
+print(all(seen), len(seen) > 0, signal.getsignal(signal.SIGINT) is not signal.default_int_handler)
+"""
+
+
+def test_signals_are_held_while_numba_compiles():
+    """A Ctrl-C inside numba's ctypes callbacks was swallowed with a traceback: it waits instead."""
+    result = subprocess.run([sys.executable, "-c", HELD_PROBE], capture_output=True, text=True, timeout=120,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split() == ["True", "True", "False"]  # held during every compile, released after
+
+
+def test_a_signal_during_a_compile_arrives_outside_it():
+    """The Python handler of a signal sent inside a compile runs once numba's compiler lock is free."""
+    script = HELD_PROBE.replace("njit(lambda x: x + 1)(1)", (
+        "import os\n"
+        "from numba.core.compiler_lock import global_compiler_lock\n"
+        "def trap(*a):\n"
+        "    print('handled-while-locked' if global_compiler_lock.is_locked() else 'handled-outside-lock')\n"
+        "    raise KeyboardInterrupt\n"
+        "signal.signal(signal.SIGINT, trap)\n"
+        "class Sender(event.Listener):\n"
+        "    def on_start(self, ev):\n"
+        "        if global_compiler_lock.is_locked(): os.kill(os.getpid(), signal.SIGINT)\n"
+        "    def on_end(self, ev): pass\n"
+        "event.register('numba:compiler_lock', Sender())\n"
+        "try:\n"
+        "    njit(lambda x: x + 1)(1)\n"
+        "except KeyboardInterrupt:\n"
+        "    raise SystemExit(0)\n"))
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split()[:1] == ["handled-outside-lock"], result.stdout
+    assert "Exception ignored" not in result.stderr and "Traceback" not in result.stderr, result.stderr
