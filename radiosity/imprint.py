@@ -567,11 +567,27 @@ def imprint_faces(vertices: np.ndarray, faces: list[np.ndarray], face_object: np
         piece_face.append(face)
         piece_hidden.append(hidden)
 
-    for index, face in enumerate(faces):
-        entries = by_face.get(index, [])
-        if not any(regions for _, regions in entries):
-            emit(vertices[face], index, False)
-            continue
+    def emit_whole(first: int, stop: int) -> None:
+        """Faces first..stop-1, uncut, at once: a per-face loop cost seconds on 10^5 faces."""
+        nonlocal n_points
+        if stop <= first:
+            return
+        run = faces[first:stop]
+        ends = np.cumsum([len(face) for face in run])
+        out_vertices.append(vertices[np.concatenate(run)])
+        numbers = np.arange(n_points, n_points + int(ends[-1]))
+        starts = np.concatenate([[0], ends[:-1]])
+        pieces.extend(numbers[a:b] for a, b in zip(starts.tolist(), ends.tolist()))
+        n_points += int(ends[-1])
+        piece_face.extend(range(first, stop))
+        piece_hidden.extend([False] * (stop - first))
+
+    cut_faces = sorted(index for index, entries in by_face.items() if any(regions for _, regions in entries))
+    done = 0
+    for index in cut_faces:
+        emit_whole(done, index)
+        done = index + 1
+        entries = by_face[index]
         if deviations[index]:
             nonplanar.append((index, deviations[index]))
         for part, regions in entries:
@@ -583,6 +599,7 @@ def imprint_faces(vertices: np.ndarray, faces: list[np.ndarray], face_object: np
                 failed.add(part.face)
             for piece in made:
                 emit(*piece)
+    emit_whole(done, len(faces))
     if failed:
         faces_text = ", ".join(str(f + 1) for f in sorted(failed)[:5]) + (" ..." if len(failed) > 5 else "")
         warnings.warn(f"imprint: GEOS could not cut {len(failed)} face(s) along their contacts ({faces_text}); "

@@ -28,6 +28,16 @@ def pytest_report_header(config):
     return "radiosity deps: " + ", ".join(parts)
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _no_user_cache(tmp_path_factory):
+    """Module and session fixtures fill with a private cache too: they are set up before any
+    function fixture, and with the user's cache they read matrices an older version had stored
+    there (the spheres of test_exchange passed on one machine and failed on a fresh one)."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("RADIOSITY_CACHE", str(tmp_path_factory.mktemp("session-cache")))
+        yield
+
+
 @pytest.fixture(autouse=True)
 def _private_cache(tmp_path_factory, monkeypatch):
     """Every test gets its own empty form-factor cache folder (never the user's)."""
