@@ -97,12 +97,10 @@ def test_escaped_is_never_negative(solved, request):
     assert (e["escaped"] >= -1e-9 * e["emitted"]).all(), f"{name}: escaped {e['escaped']}"
 
 
-def test_duplicate_faces_are_noted(solved, request):
+def test_duplicate_faces_are_noted(solved):
     name, _, _, _, _, notes = solved
     if name != "duplicate_faces":
         pytest.skip("the duplicate-faces file only")
-    request.applymarker(pytest.mark.xfail(strict=False, reason="no note for duplicate coincident faces yet: "
-                                          "issue 12 item 6 (another branch)"))
     assert any("duplicate" in n.lower() or "coincident" in n.lower() for n in notes), notes
 
 
