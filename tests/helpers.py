@@ -115,62 +115,6 @@ def perpendicular_rectangles_mp(l, w, h):
         return t / (mp.pi * W)
 
 
-# --- Lambert's formula in mpmath: the reference of tests/test_extremes.py and bench/bench_extremes.py
-def mp_vector(v):
-    return [c if isinstance(c, mp.mpf) else mp.mpf(float(c)) for c in v]
-
-
-def vec_sub(a, b):
-    return [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-
-
-def vec_dot(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def vec_cross(a, b):
-    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-
-
-def lambert_mp(x, n, poly, dps=40):
-    """Form factor from the point ``x`` (normal ``n``, need not be unit) to ``poly`` in mpmath.
-
-    The polygon is clipped to the receiver's upper half-space first; a receiver in the
-    polygon's plane gets 0 (the source is seen edge-on). Returns an mpf.
-    """
-    with mp.workdps(dps):
-        x, n = mp_vector(x), mp_vector(n)
-        nn = mp.sqrt(vec_dot(n, n))
-        n = [c / nn for c in n]
-        rel = [vec_sub(mp_vector(p), x) for p in poly]
-        k = len(rel)
-        # receiver in the source's plane: exactly zero (Newell normal, exact in mpmath)
-        N = [mp.mpf(0)] * 3
-        for i in range(k):
-            c = vec_cross(rel[i], rel[(i + 1) % k])
-            N = [N[0] + c[0], N[1] + c[1], N[2] + c[2]]
-        if vec_dot(N, N) == 0 or vec_dot(N, rel[0]) == 0:
-            return mp.mpf(0)
-        h = [vec_dot(p, n) for p in rel]
-        clipped = []
-        for i in range(k):
-            j = (i + 1) % k
-            if h[i] >= 0:
-                clipped.append(rel[i])
-            if (h[i] > 0 > h[j]) or (h[i] < 0 < h[j]):
-                t = h[i] / (h[i] - h[j])
-                clipped.append([rel[i][c] + t * (rel[j][c] - rel[i][c]) for c in range(3)])
-        total = mp.mpf(0)
-        for i in range(len(clipped)):
-            a, b = clipped[i], clipped[(i + 1) % len(clipped)]
-            cr = vec_cross(a, b)
-            s = mp.sqrt(vec_dot(cr, cr))
-            if s == 0:
-                continue
-            total += mp.atan2(s, vec_dot(a, b)) / s * vec_dot(cr, n)
-        return abs(total) / (2 * mp.pi)
-
-
 # ---------------------------------------------------------------- View3D models (.vs3 text)
 # Parallel unit plates 1 apart with a centred 0.5 x 0.5 blocker midway (BLOCKED_PARALLEL_SQUARES).
 PLATES = """T parallel plates with a blocker
@@ -375,3 +319,59 @@ def assert_one_line_error(capsys, code: int, *parts: str) -> str:
     for part in parts:
         assert part in lines[0], lines[0]
     return lines[0]
+
+
+# --- Lambert's formula in mpmath: the reference of tests/test_extremes.py and bench/bench_extremes.py
+def mp_vector(v):
+    return [c if isinstance(c, mp.mpf) else mp.mpf(float(c)) for c in v]
+
+
+def vec_sub(a, b):
+    return [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+
+
+def vec_dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def vec_cross(a, b):
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+
+
+def lambert_mp(x, n, poly, dps=40):
+    """Form factor from the point ``x`` (normal ``n``, need not be unit) to ``poly`` in mpmath.
+
+    The polygon is clipped to the receiver's upper half-space first; a receiver in the
+    polygon's plane gets 0 (the source is seen edge-on). Returns an mpf.
+    """
+    with mp.workdps(dps):
+        x, n = mp_vector(x), mp_vector(n)
+        nn = mp.sqrt(vec_dot(n, n))
+        n = [c / nn for c in n]
+        rel = [vec_sub(mp_vector(p), x) for p in poly]
+        k = len(rel)
+        # receiver in the source's plane: exactly zero (Newell normal, exact in mpmath)
+        N = [mp.mpf(0)] * 3
+        for i in range(k):
+            c = vec_cross(rel[i], rel[(i + 1) % k])
+            N = [N[0] + c[0], N[1] + c[1], N[2] + c[2]]
+        if vec_dot(N, N) == 0 or vec_dot(N, rel[0]) == 0:
+            return mp.mpf(0)
+        h = [vec_dot(p, n) for p in rel]
+        clipped = []
+        for i in range(k):
+            j = (i + 1) % k
+            if h[i] >= 0:
+                clipped.append(rel[i])
+            if (h[i] > 0 > h[j]) or (h[i] < 0 < h[j]):
+                t = h[i] / (h[i] - h[j])
+                clipped.append([rel[i][c] + t * (rel[j][c] - rel[i][c]) for c in range(3)])
+        total = mp.mpf(0)
+        for i in range(len(clipped)):
+            a, b = clipped[i], clipped[(i + 1) % len(clipped)]
+            cr = vec_cross(a, b)
+            s = mp.sqrt(vec_dot(cr, cr))
+            if s == 0:
+                continue
+            total += mp.atan2(s, vec_dot(a, b)) / s * vec_dot(cr, n)
+        return abs(total) / (2 * mp.pi)
