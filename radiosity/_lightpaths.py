@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from ._lightpaths_chunks import first_hits_chunked
+from ._lightpaths_chunks import arrival_side, first_hits_chunked, hit_distance
 
 __all__ = ["LightPaths", "trace_emitters", "N_RAYS"]
 
@@ -99,30 +99,13 @@ def _first_hits_kernel(origins, directions, v0, e1, e2, offset, hit, side):  # p
         best_t = np.inf
         best = -1
         for k in range(len(v0)):
-            ax, ay, az = e1[k, 0], e1[k, 1], e1[k, 2]
-            bx, by, bz = e2[k, 0], e2[k, 1], e2[k, 2]
-            px, py, pz = dy * bz - dz * by, dz * bx - dx * bz, dx * by - dy * bx
-            det = ax * px + ay * py + az * pz
-            if det == 0.0:
-                continue
-            inv = 1.0 / det
-            sx, sy, sz = ox - v0[k, 0], oy - v0[k, 1], oz - v0[k, 2]
-            u = (sx * px + sy * py + sz * pz) * inv
-            if u < 0.0 or u > 1.0:
-                continue
-            qx, qy, qz = sy * az - sz * ay, sz * ax - sx * az, sx * ay - sy * ax
-            v = (dx * qx + dy * qy + dz * qz) * inv
-            if v < 0.0 or u + v > 1.0:
-                continue
-            t = (bx * qx + by * qy + bz * qz) * inv
+            t = hit_distance(ox, oy, oz, dx, dy, dz, v0, e1, e2, k)
             if offset < t < best_t:
                 best_t = t
                 best = k
         hit[r] = best
         if best >= 0:
-            ax, ay, az = e1[best, 0], e1[best, 1], e1[best, 2]
-            bx, by, bz = e2[best, 0], e2[best, 1], e2[best, 2]
-            side[r] = dx * (ay * bz - az * by) + dy * (az * bx - ax * bz) + dz * (ax * by - ay * bx)
+            side[r] = arrival_side(dx, dy, dz, e1, e2, best)
 
 
 def _first_hits(origins, directions, triangles, offset) -> tuple[np.ndarray, np.ndarray]:

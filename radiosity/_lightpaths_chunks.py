@@ -15,12 +15,45 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["CHUNK", "first_hits_chunked"]
+__all__ = ["CHUNK", "arrival_side", "first_hits_chunked", "hit_distance"]
 
 CHUNK = 64
 # Boxes grow by this fraction of the scene's diagonal (and slab distances by this fraction of
 # themselves): far above the round-off of the tests, far below a triangle.
 _PAD_REL = 1e-6
+
+
+@njit(cache=True, inline="always")
+def hit_distance(ox, oy, oz, dx, dy, dz, v0, e1, e2, k):
+    """Ray parameter t where o + t d meets triangle k (Moller-Trumbore), or -inf if it misses.
+
+    The one ray-triangle test of both first-hit kernels (plain and chunked), so their hits agree
+    bit for bit.
+    """
+    ax, ay, az = e1[k, 0], e1[k, 1], e1[k, 2]
+    bx, by, bz = e2[k, 0], e2[k, 1], e2[k, 2]
+    px, py, pz = dy * bz - dz * by, dz * bx - dx * bz, dx * by - dy * bx
+    det = ax * px + ay * py + az * pz
+    if det == 0.0:
+        return -np.inf
+    inv = 1.0 / det
+    sx, sy, sz = ox - v0[k, 0], oy - v0[k, 1], oz - v0[k, 2]
+    u = (sx * px + sy * py + sz * pz) * inv
+    if u < 0.0 or u > 1.0:
+        return -np.inf
+    qx, qy, qz = sy * az - sz * ay, sz * ax - sx * az, sx * ay - sy * ax
+    v = (dx * qx + dy * qy + dz * qz) * inv
+    if v < 0.0 or u + v > 1.0:
+        return -np.inf
+    return (bx * qx + by * qy + bz * qz) * inv
+
+
+@njit(cache=True, inline="always")
+def arrival_side(dx, dy, dz, e1, e2, k):
+    """``dot(d, e1 x e2)`` of triangle k: positive when the ray arrives at its back."""
+    ax, ay, az = e1[k, 0], e1[k, 1], e1[k, 2]
+    bx, by, bz = e2[k, 0], e2[k, 1], e2[k, 2]
+    return dx * (ay * bz - az * by) + dy * (az * bx - ax * bz) + dz * (ax * by - ay * bx)
 
 
 def first_hits_chunked(origins, directions, v0, e1, e2, offset: float, hit, side) -> None:
@@ -70,27 +103,10 @@ def _kernel(origins, directions, v0, e1, e2, offset, box_lo, box_hi, chunk, hit,
             if not _reaches(ox, oy, oz, dx, dy, dz, box_lo[c], box_hi[c], best_t):
                 continue
             for k in range(c * chunk, min(n, (c + 1) * chunk)):
-                ax, ay, az = e1[k, 0], e1[k, 1], e1[k, 2]
-                bx, by, bz = e2[k, 0], e2[k, 1], e2[k, 2]
-                px, py, pz = dy * bz - dz * by, dz * bx - dx * bz, dx * by - dy * bx
-                det = ax * px + ay * py + az * pz
-                if det == 0.0:
-                    continue
-                inv = 1.0 / det
-                sx, sy, sz = ox - v0[k, 0], oy - v0[k, 1], oz - v0[k, 2]
-                u = (sx * px + sy * py + sz * pz) * inv
-                if u < 0.0 or u > 1.0:
-                    continue
-                qx, qy, qz = sy * az - sz * ay, sz * ax - sx * az, sx * ay - sy * ax
-                v = (dx * qx + dy * qy + dz * qz) * inv
-                if v < 0.0 or u + v > 1.0:
-                    continue
-                t = (bx * qx + by * qy + bz * qz) * inv
+                t = hit_distance(ox, oy, oz, dx, dy, dz, v0, e1, e2, k)
                 if offset < t < best_t:
                     best_t = t
                     best = k
         hit[r] = best
         if best >= 0:
-            ax, ay, az = e1[best, 0], e1[best, 1], e1[best, 2]
-            bx, by, bz = e2[best, 0], e2[best, 1], e2[best, 2]
-            side[r] = dx * (ay * bz - az * by) + dy * (az * bx - ax * bz) + dz * (ax * by - ay * bx)
+            side[r] = arrival_side(dx, dy, dz, e1, e2, best)

@@ -8,7 +8,7 @@ from dataclasses import dataclass, fields, replace
 from ._errors import RadiosityWarning
 from ._validate import reject_unknown
 
-__all__ = ["Options", "PRESETS", "DEPRECATED_OPTIONS", "rename_deprecated"]
+__all__ = ["Options", "PRESETS", "DEPRECATED_OPTIONS", "rename_deprecated", "warn_ignored"]
 
 # Old spellings of Options fields (docs/options.md): still accepted, with a RadiosityWarning.
 # "rtol" meant three things; the solver's is a relative residual, the visibility one is absolute.
@@ -34,6 +34,13 @@ def rename_deprecated(options: dict, what: str = "solve option", *, stacklevel: 
         warnings.warn(f"{what} {old!r} is deprecated; use {new!r}", RadiosityWarning, stacklevel=stacklevel)
         out[new] = out.pop(old)
     return out
+
+
+def warn_ignored(name: str, what: str = "solve option", reason: str = "", *, stacklevel: int = 3) -> None:
+    """Warn (as :func:`rename_deprecated` does) that the deprecated ``name`` has no effect."""
+    why = f" ({reason})" if reason else ""
+    warnings.warn(f"{what} {name!r} is deprecated and ignored{why}; leave it out", RadiosityWarning,
+                  stacklevel=stacklevel)
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._validate import as_points, as_unit_vectors
-from .options import rename_deprecated
+from .options import rename_deprecated, warn_ignored
 from .scene import Scene
 
 _SENSOR_ALIAS = {"rtol": "sensor_rtol"}  # docs/options.md
@@ -117,7 +117,8 @@ class Solution:
             sources whose contributions add up to less than ``2 sensor_rtol H`` are counted half
             visible instead of clipped. 0 clips every shadow exactly. Same as ``--sensor-rtol``.
         samples : None
-            Ignored (kept so older calls still run; shadows are exact, not sampled).
+            Deprecated and ignored: shadows are exact, not sampled. Kept so older calls still
+            run; a value other than None warns (``RadiosityWarning``).
         rtol : float, optional
             Old name of ``sensor_rtol`` (deprecated, warns).
         """
@@ -128,6 +129,8 @@ class Solution:
         normals = as_unit_vectors(normals, "normals")
         if len(points) != len(normals):
             raise ValueError(f"points and normals must have the same length, got {len(points)} and {len(normals)}")
+        if samples is not None:
+            warn_ignored("samples", "irradiance option", "shadows are exact, not sampled")
         if rtol is not None:
             sensor_rtol = rename_deprecated({"rtol": rtol}, "irradiance option", aliases=_SENSOR_ALIAS)["sensor_rtol"]
         if not (np.isfinite(sensor_rtol) and 0.0 <= sensor_rtol < 1.0):

@@ -67,10 +67,9 @@ class Mutant:
 # Base inputs
 
 def _vs3_bases() -> dict[str, str]:
-    from test_view3d import PLATES
-    from test_view3d_semantics import CUBE_3A, ROOM
+    from helpers import CUBE_3A, PLATES, ROOM_VS3
 
-    return {"plates": PLATES, "room": ROOM, "cube_3a": CUBE_3A}
+    return {"plates": PLATES, "room": ROOM_VS3, "cube_3a": CUBE_3A}
 
 
 POINTS = """# x y z nx ny nz: receivers in the unit cube

@@ -1,9 +1,16 @@
-"""Canonical geometries with their reference values (see ../shared/FIELD_NOTES.md)."""
+"""Canonical geometries with their reference values (see ../shared/FIELD_NOTES.md), and the
+builders and checks several test modules share (test modules import from here, not from each
+other)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import mpmath as mp
 import numpy as np
+
+DATA = Path(__file__).parent / "data"
+ROOM = DATA / "room.obj"  # the small room the CLI tests solve
 
 UNIT_SQUARE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)  # normal +z
 
@@ -24,6 +31,26 @@ WALL_X0 = np.array([[0, 0, 0], [0, 0, 1], [0, 1, 1], [0, 1, 0]], dtype=float)  #
 BLOCKED_PARALLEL_SQUARES = 0.0995062946
 # Coaxial disks, radius = distance: (3 - sqrt 5) / 2.
 COAXIAL_DISKS = 0.3819660113
+# A unit cube without its top, faces looking in: every row sums to 0.8.
+OPEN_BOX = """v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+v 0 0 1
+v 1 0 1
+v 1 1 1
+v 0 1 1
+o bottom
+f 1 2 3 4
+o front
+f 1 5 6 2
+o back
+f 4 3 7 8
+o left
+f 1 4 8 5
+o right
+f 2 6 7 3
+"""
 
 
 def corner_point_factor(a: float, b: float, c: float) -> float:
@@ -86,6 +113,212 @@ def perpendicular_rectangles_mp(l, w, h):
              + (mp.log((1 + W**2) * (1 + H**2) / (1 + s)) + W**2 * mp.log(W**2 * (1 + s) / ((1 + W**2) * s))
                 + H**2 * mp.log(H**2 * (1 + s) / ((1 + H**2) * s))) / 4)
         return t / (mp.pi * W)
+
+
+# ---------------------------------------------------------------- View3D models (.vs3 text)
+# Parallel unit plates 1 apart with a centred 0.5 x 0.5 blocker midway (BLOCKED_PARALLEL_SQUARES).
+PLATES = """T parallel plates with a blocker
+C eps=1e-4
+F 3
+! the lower plate faces up, the upper one down
+V 1 0 0 0
+V 2 1 0 0
+V 3 1 1 0
+V 4 0 1 0
+V 5 0 0 1
+V 6 0 1 1
+V 7 1 1 1
+V 8 1 0 1
+V 9 0.25 0.25 0.5
+V 10 0.75 0.25 0.5
+V 11 0.75 0.75 0.5
+V 12 0.25 0.75 0.5
+S 1 1 2 3 4 0 0 0.9 lower
+S 2 5 6 7 8 0 0 0.8 upper
+O 3 9 10 11 12 0 0 0 blocker
+E
+"""
+
+# A 4 x 3 x 2.5 m room, every surface facing in; a door (on the floor edge) and a window in the
+# south wall (y = 0) are its subsurfaces (base 3). Comments after the data, as View3D allows.
+ROOM_VS3 = """T room with a door and a window in the south wall
+C encl=1 eps=1e-6
+F 3
+V 1 0 0 0
+V 2 4 0 0
+V 3 4 3 0
+V 4 0 3 0
+V 5 0 0 2.5
+V 6 4 0 2.5
+V 7 4 3 2.5
+V 8 0 3 2.5
+V 9 0.5 0 0
+V 10 1.4 0 0
+V 11 1.4 0 2
+V 12 0.5 0 2
+V 13 2 0 1
+V 14 3.5 0 1
+V 15 3.5 0 2
+V 16 2 0 2
+!  #  v1 v2 v3 v4 base cmb emit name
+S 1   1  2  3  4   0   0  0.9  floor     ! faces up
+S 2   8  7  6  5   0   0  0.9  ceiling   ! faces down
+S 3   1  5  6  2   0   0  0.9  south     / faces north
+S 4   4  3  7  8   0   0  0.9  north
+S 5   1  4  8  5   0   0  0.9  west
+S 6   2  6  7  3   0   0  0.9  east
+S 7   9 12 11 10   3   0  0.6  door      ! in the south wall
+S 8  13 16 15 14   3   0  0.1  window
+E
+"""
+
+# The same unit cube in format 3a: rectangles by origin, azimuth, tilt, width and height;
+# the north wall as a general quadrilateral, the top as two triangles; a blocker obstruction.
+CUBE_3A = """T unit cube, F 3a
+F 3a
+!  #  shape base cmb emit name
+S 1 R 0 0 0.5 bottom
+  1 1 0   0 0     1 1
+S 2 R 0 0 0.5 south   ! faces north (azimuth 0), vertical
+  1 0 0   0 90    1 1
+S 3 Q 0 0 0.5 north
+  0 1 0   180 90
+  0 0  1 0  1 1  0 1
+S 4 R 0 0 0.5 west
+  0 0 0   90 90   1 1
+S 5 R 0 0 0.5 east
+  1 1 0   270 90  1 1
+S 6 T 0 0 0.5 top
+  1 0 1   0 180   0 0  1 0  1 1
+S 7 T 0 6 0.5 top_b
+  1 0 1   0 180   0 0  1 1  0 1
+O 8 R
+  0.75 0.75 0.5  0 0  0.5 0.5
+E
+"""
+
+
+# ---------------------------------------------------------------- builders shared by test modules
+def polygon_area(poly: np.ndarray) -> float:
+    """Area of a planar polygon (k, 3): the centred Newell sum, written out independently of
+    ``radiosity.geometry`` (an oracle for it)."""
+    centred = poly - poly.mean(axis=0)
+    return 0.5 * float(np.linalg.norm(np.cross(centred, np.roll(centred, -1, axis=0)).sum(axis=0)))
+
+
+def grid(n, z, *, down, x0=0.0, x1=1.0, y0=0.0, y1=1.0):
+    """An (x0..x1) x (y0..y1) rectangle at height z cut into n x n patches (n*n, 4, 3), facing
+    +z (down=False) or -z; down=True reverses each quad's winding but keeps the patch order."""
+    xs, ys = np.linspace(x0, x1, n + 1), np.linspace(y0, y1, n + 1)
+    a, b = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    a, b = a.ravel(), b.ravel()
+    q = np.stack([np.column_stack([xs[a], ys[b]]), np.column_stack([xs[a + 1], ys[b]]),
+                  np.column_stack([xs[a + 1], ys[b + 1]]), np.column_stack([xs[a], ys[b + 1]])], axis=1)
+    q = np.concatenate([q, np.full(q.shape[:2] + (1,), float(z))], axis=2)
+    return q[:, ::-1].copy() if down else q
+
+
+def rect(x0, x1, y0, y1, z, *, down=False):
+    """One (x0..x1) x (y0..y1) quad at height z facing +z (or -z)."""
+    q = np.array([[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]], float)
+    return q[::-1].copy() if down else q
+
+
+def boxes_scene():
+    """Floor, ceiling and two boxes (10 occluder faces) between them: a small Cornell box.
+
+    Returns (quads (n, 4, 3), groups (n,)), one group per part."""
+    def box(x0, x1, y0, y1, h):
+        c = [[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
+        faces = [rect(x0, x1, y0, y1, h)]
+        for k in range(4):
+            (a0, b0), (a1, b1) = c[k], c[(k + 1) % 4]
+            faces.append(np.array([[a0, b0, 0], [a1, b1, 0], [a1, b1, h], [a0, b0, h]], float))
+        return faces
+
+    parts = [grid(8, 0, down=False), grid(4, 1, down=True), np.array(box(0.2, 0.45, 0.2, 0.5, 0.6)),
+             np.array(box(0.55, 0.8, 0.4, 0.7, 0.35))]
+    groups = np.repeat(np.arange(len(parts)), [len(p) for p in parts])
+    return np.concatenate(parts), groups
+
+
+def make_vis(quads, groups=None, **kw):
+    """A Visibility of the patches ``quads`` (one object each unless ``groups``), scaled by
+    their bounding box; ``kw`` go to Visibility."""
+    from radiosity.geometry import polygon_normals
+    from radiosity.visibility import Visibility
+
+    quads = np.asarray(quads, float)
+    groups = np.arange(len(quads)) if groups is None else np.asarray(groups)
+    scale = float(np.linalg.norm(np.ptp(quads.reshape(-1, 3), axis=0)))
+    return Visibility(quads, polygon_normals(quads), groups, scale, **kw)
+
+
+def all_pairs(n):
+    """(i, j) of every ordered pair i != j of n patches."""
+    i, j = np.nonzero(~np.eye(n, dtype=bool))
+    return i, j
+
+
+def prism(radius: float, length: float, sides: int, *, inward: bool, z0: float = 0.0) -> list[np.ndarray]:
+    """A closed regular prism: walls as quads, caps as triangle fans (facing out, or in)."""
+    t = np.linspace(0, 2 * np.pi, sides, endpoint=False)
+    ring = np.column_stack([radius * np.cos(t), radius * np.sin(t)])
+    polys = []
+    for k in range(sides):
+        a, b = ring[k], ring[(k + 1) % sides]
+        polys.append(np.array([[*a, z0], [*b, z0], [*b, z0 + length], [*a, z0 + length]]))
+    for z, up in ((z0, False), (z0 + length, True)):
+        for k in range(sides):
+            a, b = ring[k], ring[(k + 1) % sides]
+            tri = np.array([[0.0, 0.0, z], [*a, z], [*b, z]])
+            polys.append(tri if up else tri[::-1])
+    return [p[::-1].copy() for p in polys] if inward else polys
+
+
+def fill(parts, settings, *, groups=None, **vis_kw):
+    """The uniform fill of the patches ``parts`` (a list of (n_k, 4, 3), one object each unless
+    ``groups``) with ``settings`` (a FillSettings): (F as a dense array, areas, stats)."""
+    from radiosity.geometry import centroids_and_areas, polygon_normals
+    from radiosity.methods.uniform.assembly import assemble
+    from radiosity.visibility import Visibility
+
+    quads = np.concatenate(parts)
+    groups = np.repeat(np.arange(len(parts)), [len(p) for p in parts]) if groups is None else groups
+    normals = polygon_normals(quads)
+    centroid, area = centroids_and_areas(quads)
+    scale = float(np.linalg.norm(np.ptp(quads.reshape(-1, 3), axis=0)))
+    vis = Visibility(quads, normals, groups, scale, samples=settings.visibility_samples,
+                     max_samples=settings.visibility_max_samples, **vis_kw)
+    F, stats = assemble(quads, normals, centroid, area, vis, settings)
+    return F.toarray(), area, stats
+
+
+def plate_total(F, area, n):
+    """A F summed from the first n x n plate of a fill to the second: the plate-to-plate factor
+    times the plate's area."""
+    m = n * n
+    return float((area[:m, None] * F[:m, m:2 * m]).sum())
+
+
+# ---------------------------------------------------------------- command line
+def solve_args(out: Path, *extra: str, scene: Path | None = ROOM) -> list[str]:
+    """Arguments of a quick ``radiosity solve`` (draft, no picture) of ``scene`` into ``out``."""
+    return ["solve", *([str(scene)] if scene else []), "--preset", "draft", "--no-picture", "-o", str(out), *extra]
+
+
+def assert_one_line_error(capsys, code: int, *parts: str) -> str:
+    """The CLI failed with exit code 2 and one line ``radiosity: error: ...`` holding ``parts``
+    (no traceback); returns that line."""
+    captured = capsys.readouterr()
+    assert code == 2, captured.err
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1, captured.err
+    assert lines[0].startswith("radiosity: error: ")
+    assert "Traceback" not in captured.err
+    for part in parts:
+        assert part in lines[0], lines[0]
+    return lines[0]
 
 
 # --- Lambert's formula in mpmath: the reference of tests/test_extremes.py and bench/bench_extremes.py

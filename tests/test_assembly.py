@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from helpers import BLOCKED_PARALLEL_SQUARES, PARALLEL_SQUARES, write_obj
+from helpers import BLOCKED_PARALLEL_SQUARES, PARALLEL_SQUARES, boxes_scene, fill, grid, plate_total, write_obj
 
 pytest.importorskip("embreex")
 
@@ -16,34 +16,6 @@ from radiosity.geometry import centroids_and_areas  # noqa: E402
 from radiosity.visibility import Visibility  # noqa: E402
 
 HALF_BLOCKED = PARALLEL_SQUARES[1.0] / 2  # a half-plane blocker at mid-height hides half, by symmetry
-
-
-def grid(n, z, *, down, x0=0.0, x1=1.0, y0=0.0, y1=1.0):
-    """An (x0..x1) x (y0..y1) rectangle at height z cut into n x n patches."""
-    xs, ys = np.linspace(x0, x1, n + 1), np.linspace(y0, y1, n + 1)
-    a, b = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-    a, b = a.ravel(), b.ravel()
-    q = np.stack([np.column_stack([xs[a], ys[b]]), np.column_stack([xs[a + 1], ys[b]]),
-                  np.column_stack([xs[a + 1], ys[b + 1]]), np.column_stack([xs[a], ys[b + 1]])], axis=1)
-    q = np.concatenate([q, np.full(q.shape[:2] + (1,), float(z))], axis=2)
-    return q[:, ::-1].copy() if down else q
-
-
-def fill(parts, settings, *, groups=None, **vis_kw):
-    quads = np.concatenate(parts)
-    groups = np.repeat(np.arange(len(parts)), [len(p) for p in parts]) if groups is None else groups
-    normals = polygon_normals(quads)
-    centroid, area = centroids_and_areas(quads)
-    scale = float(np.linalg.norm(np.ptp(quads.reshape(-1, 3), axis=0)))
-    vis = Visibility(quads, normals, groups, scale, samples=settings.visibility_samples,
-                     max_samples=settings.visibility_max_samples, **vis_kw)
-    F, stats = assemble(quads, normals, centroid, area, vis, settings)
-    return F.toarray(), area, stats
-
-
-def plate_total(F, area, n):
-    m = n * n
-    return float((area[:m, None] * F[:m, m:2 * m]).sum())
 
 
 EXACT = FillSettings(formfactor_rtol=1e-6, near_order=6, far_separation=1e9, visibility="exact")
@@ -184,8 +156,6 @@ def test_fill_computes_each_pair_once_and_mirrors_it(mode, monkeypatch):
     """assemble computes each unordered pair once, the smaller patch receiving: that entry is
     f_ij x fraction(i, j) (rays) or f_ij - hidden(i, j) (exact shadows over shadow-aligned
     cells), and its mirror is A_i F_ij / A_j (reciprocity)."""
-    from test_visibility import boxes_scene
-
     import radiosity.visibility._constants as constants
 
     monkeypatch.setattr(constants, "MAX_CELL_OCCLUDERS", 10**9)  # every exact pair over cells here
@@ -228,8 +198,6 @@ def test_fill_computes_each_pair_once_and_mirrors_it(mode, monkeypatch):
 
 
 def test_inactive_patches_are_left_out_and_nothing_else_changes():
-    from test_visibility import boxes_scene
-
     quads, groups = boxes_scene()
     normals = polygon_normals(quads)
     centroid, area = centroids_and_areas(quads)
@@ -251,8 +219,6 @@ def test_inactive_patches_are_left_out_and_nothing_else_changes():
 def test_facing_pairs_loop_matches_numpy():
     """candidate_pairs' compiled loop against its numpy form: coplanar, touching, back-to-back and
     facing patches of the boxes scene, and random patches, give the same pairs."""
-    from test_visibility import boxes_scene
-
     from radiosity.methods.uniform import assembly
     from radiosity.methods.uniform._reference import _facing_numpy
 
@@ -275,8 +241,6 @@ def test_facing_pairs_loop_matches_numpy():
 def test_pairs_behind_many_occluders_keep_the_fixed_points(monkeypatch):
     """The cells serve pairs with at most MAX_CELL_OCCLUDERS possible occluders; past that (a room
     full of boxes, where the cells cost minutes) the fill is the fixed-point one, entry for entry."""
-    from test_visibility import boxes_scene
-
     import radiosity.visibility._constants as constants
 
     quads, groups = boxes_scene()

@@ -13,25 +13,9 @@ import scipy.sparse as sp
 from radiosity.cli import main
 from radiosity.io.export import STAGING_PREFIX
 
-DATA = Path(__file__).parent / "data"
-ROOM = DATA / "room.obj"
+from helpers import DATA, ROOM, assert_one_line_error, solve_args
+
 OUTPUTS = ["solution.glb", "solution.ply", "solution.vtp", "summary.json"]
-
-
-def solve_args(out: Path, *extra: str, scene: Path | None = ROOM) -> list[str]:
-    return ["solve", *([str(scene)] if scene else []), "--preset", "draft", "--no-picture", "-o", str(out), *extra]
-
-
-def assert_one_line_error(capsys, code: int, *parts: str) -> str:
-    captured = capsys.readouterr()
-    assert code == 2, captured.err
-    lines = captured.err.strip().splitlines()
-    assert len(lines) == 1, captured.err
-    assert lines[0].startswith("radiosity: error: ")
-    assert "Traceback" not in captured.err
-    for part in parts:
-        assert part in lines[0], lines[0]
-    return lines[0]
 
 
 def snapshot(folder: Path) -> dict[str, bytes]:

@@ -12,8 +12,7 @@ import pytest
 import radiosity
 from radiosity.cli import build_parser, main
 
-DATA = Path(__file__).parent / "data"
-ROOM = DATA / "room.obj"
+from helpers import DATA, ROOM
 
 
 def test_version_matches_the_package_metadata(capsys):

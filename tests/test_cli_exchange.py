@@ -12,7 +12,7 @@ import radiosity
 from radiosity.cli import main
 from radiosity.exchange import STEFAN_BOLTZMANN as SIGMA
 
-from helpers import square_at, write_obj
+from helpers import assert_one_line_error, square_at, write_obj
 
 CUBE = radiosity.bundled_scene("unit_cube")
 
@@ -33,15 +33,6 @@ heat_flux = 0.0
 def read_rows(path):
     with open(path, newline="") as fh:
         return {row["object"]: row for row in csv.DictReader(fh)}
-
-
-def assert_one_line_error(capsys, code, *parts):
-    err = capsys.readouterr().err
-    assert code == 2, err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("radiosity: error: "), err
-    for part in parts:
-        assert part in lines[0], lines[0]
 
 
 def test_exchange_writes_table_csv_and_vtp(tmp_path, capsys):

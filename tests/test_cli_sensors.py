@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from radiosity.cli import _solve, build_parser, main
-from test_cli import assert_one_line_error, solve_args
+
+from helpers import assert_one_line_error, solve_args
 
 
 def never(*args, **kwargs):

@@ -8,7 +8,7 @@ import scipy.sparse as sp
 import radiosity
 from radiosity.cli import main
 from radiosity.io.export import read_vf
-from test_factors import ADJACENT, OPEN_BOX, OPPOSITE
+from helpers import OPEN_BOX, PARALLEL_SQUARES, PERPENDICULAR_SQUARES, ROOM_VS3
 
 CUBE = radiosity.bundled_scene("unit_cube")
 
@@ -27,8 +27,8 @@ def test_subdivided_matrix_comes_with_its_patches(tmp_path, capsys):
         G = sp.csr_matrix((z["group_data"], z["group_indices"], z["group_indptr"]), shape=tuple(z["group_shape"]))
         assert z["group_names"].tolist() == radiosity.load_scene(CUBE).objects
         assert z["patch_group"].tolist() == z["patch_object"].tolist()
-    np.testing.assert_allclose(G.toarray()[0, 1], OPPOSITE, rtol=1e-6)  # bottom -> top
-    np.testing.assert_allclose(G.toarray()[0, 2], ADJACENT, rtol=1e-6)
+    np.testing.assert_allclose(G.toarray()[0, 1], PARALLEL_SQUARES[1.0], rtol=1e-6)  # bottom -> top
+    np.testing.assert_allclose(G.toarray()[0, 2], PERPENDICULAR_SQUARES, rtol=1e-6)
 
 
 def test_vf_files_text_and_binary(tmp_path, capsys):
@@ -60,10 +60,8 @@ def test_closure_on_an_open_box_exits_2_and_writes_nothing(tmp_path, capsys):
 
 
 def test_view3d_model_encl_and_sums(tmp_path, capsys):
-    from test_view3d_semantics import ROOM
-
     model = tmp_path / "room.vs3"
-    model.write_text(ROOM)
+    model.write_text(ROOM_VS3)
     out, vf = tmp_path / "F.npz", tmp_path / "F.vf"
     assert main(["viewfactors", str(model), "-o", str(out), "--sum", "object", "--vf", str(vf)]) == 0
     printed = capsys.readouterr().out

@@ -17,9 +17,7 @@ import scipy.sparse as sp
 
 import radiosity
 from radiosity.methods.uniform.system import energy_balance, gain_note, gaining_patches
-from helpers import write_obj
-from test_exchange import prism
-from test_visibility import make_vis
+from helpers import make_vis, prism, write_obj
 
 RING = 12
 

@@ -21,7 +21,7 @@ from radiosity.visibility import _exact
 
 pytest.importorskip("embreex")
 
-from test_visibility import all_pairs, boxes_scene, make_vis  # noqa: E402
+from helpers import all_pairs, boxes_scene, make_vis  # noqa: E402
 
 # Two polygons GEOS 3.14 cannot unite, plain or snap-rounded: cells of an imprinted floor next to
 # a box foot, one of them invalid (a hole touching its shell), from round-off in a difference.

@@ -15,7 +15,8 @@ from radiosity.exchange import CLOSURE_TOL, STEFAN_BOLTZMANN as SIGMA
 
 pytestmark = pytest.mark.filterwarnings("ignore:.*no face emits light:radiosity.RadiosityWarning")
 
-from helpers import BLOCKED_PARALLEL_SQUARES, PARALLEL_SQUARES, PERPENDICULAR_SQUARES, parallel_rectangles_mp, square_at, write_obj
+from helpers import (BLOCKED_PARALLEL_SQUARES, PARALLEL_SQUARES, PERPENDICULAR_SQUARES, PLATES, parallel_rectangles_mp,
+                     prism, square_at, write_obj)
 
 # Meshed spheres: the formula assumes uniform radiosity on each sphere. Measured after closure:
 # 5e-8 (icosahedra), 2e-6 (subdivided once); see docs/exchange.md.
@@ -345,8 +346,6 @@ def test_open_plates_network_conservation_and_round_trip(e1, e2, T1, T2, Ta, flu
 def test_view3d_obstruction_blocks_and_takes_no_part(tmp_path):
     """Black plates with a centred blocker from a View3D model: J = sigma T^4 is uniform, so
     each plate's mean flux is sigma (T^4 - F12 T_other^4 - (1 - F12) T_amb^4) exactly."""
-    from test_view3d import PLATES
-
     path = tmp_path / "plates.vs3"
     path.write_text(PLATES)
     # Cut: with each plate one patch the fill is 9% low (the shadow edge crosses the receiver
@@ -366,22 +365,6 @@ def test_view3d_obstruction_blocks_and_takes_no_part(tmp_path):
 
 
 # --- concentric cylinders (closed by end caps) --------------------------------------------------
-
-def prism(radius: float, length: float, sides: int, *, inward: bool, z0: float = 0.0) -> list[np.ndarray]:
-    """A closed regular prism: walls as quads, caps as triangle fans (facing out, or in)."""
-    t = np.linspace(0, 2 * np.pi, sides, endpoint=False)
-    ring = np.column_stack([radius * np.cos(t), radius * np.sin(t)])
-    polys = []
-    for k in range(sides):
-        a, b = ring[k], ring[(k + 1) % sides]
-        polys.append(np.array([[*a, z0], [*b, z0], [*b, z0 + length], [*a, z0 + length]]))
-    for z, up in ((z0, False), (z0 + length, True)):
-        for k in range(sides):
-            a, b = ring[k], ring[(k + 1) % sides]
-            tri = np.array([[0.0, 0.0, z], [*a, z], [*b, z]])
-            polys.append(tri if up else tri[::-1])
-    return [p[::-1].copy() for p in polys] if inward else polys
-
 
 @pytest.fixture(scope="module")
 def cylinders(tmp_path_factory):

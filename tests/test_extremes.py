@@ -18,7 +18,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from radiosity import point_to_polygon, polygon_to_polygon
-from helpers import lambert_mp, parallel_rectangles_mp, perpendicular_rectangles_mp
+from helpers import lambert_mp, parallel_rectangles_mp, perpendicular_rectangles_mp, polygon_area
 from helpers import mp_vector as _mp3
 
 U = 2.0**-53
@@ -805,11 +805,6 @@ def _facing_pair(seed):
             return a, b
 
 
-def _area(p):
-    c = p - p.mean(0)
-    return 0.5 * np.linalg.norm(np.cross(c, np.roll(c, -1, 0)).sum(0))
-
-
 @settings(max_examples=8)
 @given(st.integers(0, 2**32 - 1))
 def test_pair_reciprocity(seed):
@@ -817,7 +812,7 @@ def test_pair_reciprocity(seed):
     values also match the contour integral to 7.7e-14)."""
     a, b = _facing_pair(seed)
     fab, fba = polygon_to_polygon(a, b, rtol=1e-10), polygon_to_polygon(b, a, rtol=1e-10)
-    assert fab > 0 and _close(_area(a) * fab, _area(b) * fba, 1e-11)
+    assert fab > 0 and _close(polygon_area(a) * fab, polygon_area(b) * fba, 1e-11)
 
 
 @settings(max_examples=6)

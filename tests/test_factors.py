@@ -11,28 +11,10 @@ import radiosity
 from radiosity.enclosure import NotClosedError, check_closed
 from radiosity.factors import group_factors
 
+from helpers import OPEN_BOX, PARALLEL_SQUARES, PERPENDICULAR_SQUARES
+
 CUBE = radiosity.bundled_scene("unit_cube")
-# A unit cube without its top, faces looking in: every row sums to 0.8.
-OPEN_BOX = """v 0 0 0
-v 1 0 0
-v 1 1 0
-v 0 1 0
-v 0 0 1
-v 1 0 1
-v 1 1 1
-v 0 1 1
-o bottom
-f 1 2 3 4
-o front
-f 1 5 6 2
-o back
-f 4 3 7 8
-o left
-f 1 4 8 5
-o right
-f 2 6 7 3
-"""
-OPPOSITE, ADJACENT = 0.1998248957, 0.2000437761  # unit cube faces (Hottel)
+OPPOSITE, ADJACENT = PARALLEL_SQUARES[1.0], PERPENDICULAR_SQUARES  # unit cube faces (Hottel)
 
 
 @pytest.fixture(scope="module")

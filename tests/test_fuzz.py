@@ -124,7 +124,7 @@ def test_a_tiny_base_with_subsurfaces_is_refused_or_cut(tmp_path, factor):
     import re
 
     import radiosity
-    from test_view3d_semantics import ROOM
+    from helpers import ROOM_VS3 as ROOM
 
     def scale(match):
         return match[1] + "".join(f" {float(x) * factor!r}" for x in match.groups()[1:])
@@ -155,7 +155,7 @@ def test_a_self_crossing_subsurface_is_refused_by_name(tmp_path):
     """A door corner moved to x = 5e-324 made the door's outline cross itself; GEOS's
     TopologyException came out as an internal error."""
     import radiosity
-    from test_view3d_semantics import ROOM
+    from helpers import ROOM_VS3 as ROOM
 
     path = tmp_path / "crossed.vs3"
     path.write_text(ROOM.replace("V 11 1.4 0 2", "V 11 5e-324 0 2"))

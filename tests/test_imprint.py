@@ -13,7 +13,7 @@ from radiosity.imprint import CONTACT_REL, convex_pieces, imprint_faces, subdivi
 from radiosity.io.obj import read_obj
 from radiosity.geometry import centroids_and_areas
 
-from helpers import write_obj
+from helpers import polygon_area, write_obj
 
 CORNELL = radiosity.bundled_scene("cornell_box")
 
@@ -22,11 +22,6 @@ def _load(**options):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", radiosity.RadiosityWarning)
         return radiosity.load_scene(CORNELL, **options)
-
-
-def _area(poly: np.ndarray) -> float:
-    centred = poly - poly.mean(axis=0)
-    return 0.5 * float(np.linalg.norm(np.cross(centred, np.roll(centred, -1, axis=0)).sum(axis=0)))
 
 
 def _xz(points: np.ndarray) -> np.ndarray:
@@ -105,9 +100,9 @@ def test_area_conserved_per_face():
         totals = np.bincount(scene.patch_face, weights=scene.patch_area, minlength=len(data.faces))
         for index, face in enumerate(data.faces):
             poly = data.vertices[face]
-            expected = _area(poly)
+            expected = polygon_area(poly)
             if data.objects[data.face_object[index]] == "red_wall":  # non-planar: its fan triangles
-                expected = _area(poly[[0, 1, 2]]) + _area(poly[[0, 2, 3]])
+                expected = polygon_area(poly[[0, 1, 2]]) + polygon_area(poly[[0, 2, 3]])
             assert totals[index] == pytest.approx(expected, rel=1e-9)
 
 
@@ -189,7 +184,7 @@ def _imprint(objects: dict[str, list[np.ndarray]]):
 
 def _hidden_area(cut, face: int) -> float:
     mask = (cut.piece_face == face) & cut.piece_hidden
-    return sum(_area(cut.vertices[p]) for p, m in zip(cut.pieces, mask) if m)
+    return sum(polygon_area(cut.vertices[p]) for p, m in zip(cut.pieces, mask) if m)
 
 
 def test_box_without_bottom_hides_its_footprint():
@@ -254,7 +249,7 @@ def test_pieces_are_convex_planar_and_keep_the_winding():
         ref = np.cross(vertices[faces[face]][1] - vertices[faces[face]][0],
                        vertices[faces[face]][2] - vertices[faces[face]][0])
         assert normal @ ref > 0
-    floor_area = sum(_area(cut.vertices[p]) for p, f in zip(cut.pieces, cut.piece_face) if f == 0)
+    floor_area = sum(polygon_area(cut.vertices[p]) for p, f in zip(cut.pieces, cut.piece_face) if f == 0)
     assert floor_area == pytest.approx(4.0, rel=1e-12)
 
 

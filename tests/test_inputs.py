@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 import radiosity
 from radiosity import SceneError
 from radiosity.io._text import ENV_MAX_INPUT, excerpt, parse_float, split_lines
-from test_view3d import PLATES
+from helpers import PLATES
 
 TRIANGLE = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
 VS3_SQUARES = PLATES.split("O 3")[0] + "E\n"  # the two plates without their blocker

@@ -21,7 +21,7 @@ import pytest
 from radiosity._startup import INTERRUPTED_LINE
 from radiosity.io.export import STAGING_PREFIX
 
-ROOM = Path(__file__).parent / "data" / "room.obj"
+from helpers import ROOM
 
 
 def run_cli(out: Path, cache: Path, *, interrupt_after: float | None = None,

@@ -21,7 +21,7 @@ import radiosity
 from radiosity import RadiosityError, RadiosityWarning, SceneError
 from radiosity.io.obj import read_mtl, read_obj
 
-DATA = Path(__file__).parent / "data"
+from helpers import DATA
 BAD = sorted(DATA.glob("bad_*.obj"))
 
 

@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
 
 from radiosity import _kernels
 from radiosity.cli import main
 
-ROOM = Path(__file__).parent / "data" / "room.obj"
+from helpers import ROOM
 
 
 def test_every_kernel_is_cached_on_disk():

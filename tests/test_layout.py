@@ -19,7 +19,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "radiosity"
 STAGES: list[tuple[str, tuple[str, ...]]] = [
     ("foundation", ("radiosity._errors", "radiosity._tol", "radiosity._validate", "radiosity._startup",
                     "radiosity._memory", "radiosity.options")),
-    ("geometry", ("radiosity.geometry", "radiosity.geometry.*")),
+    ("geometry", ("radiosity.geometry", "radiosity.geometry.*", "radiosity._geometry_kernels")),
     ("reading", ("radiosity.io", "radiosity.io._text", "radiosity.io._files", "radiosity.io._obj_bulk",
                  "radiosity.io.obj")),
     ("scene", ("radiosity._ngon", "radiosity._patches_bulk", "radiosity.patches", "radiosity.imprint", "radiosity._checks",

@@ -17,8 +17,7 @@ from radiosity._lightpaths import N_RAYS, _triangles
 from radiosity.cli import main
 from radiosity.viz import auto_camera, choose_camera, parse_camera
 
-DATA = Path(__file__).parent / "data"
-ROOM = DATA / "room.obj"
+from helpers import ROOM
 
 MTL = """newmtl white
 Kd 0.7 0.7 0.7

@@ -58,6 +58,17 @@ def test_irradiance_rtol_alias_gives_the_same_values(solved):
     np.testing.assert_array_equal(old, new)
 
 
+def test_irradiance_samples_warns_and_changes_nothing(solved):
+    """``samples`` is accepted (older calls still run), warns that it is ignored, and is: the
+    shadows are exact, so the values are those of a call without it."""
+    points = np.array([[0.3, 0.01, 0.3], [0.2, 0.3, 0.1]]) * solved.scene.patch_quads.max()
+    normals = np.tile([0.0, 1.0, 0.0], (2, 1))
+    new = solved.irradiance(points, normals)
+    with pytest.warns(RadiosityWarning, match="'samples' is deprecated and ignored"):
+        old = solved.irradiance(points, normals, samples=16)
+    np.testing.assert_array_equal(old, new)
+
+
 def test_cli_patch_size_goes_to_the_loading_door(tmp_path):
     """--max-patch-size cuts the scene as load_scene(max_patch_size=) does, not as solve would."""
     out = tmp_path / "F.npz"

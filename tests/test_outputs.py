@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,8 +12,7 @@ import radiosity
 from radiosity.cli import main
 from radiosity.io.export import triangles, write_ply
 
-DATA = Path(__file__).parent / "data"
-ROOM = DATA / "room.obj"
+from helpers import DATA, ROOM
 
 # A floor with a block standing on it and a lamp above: the block's footprint is hidden.
 BLOCK_SCENE = """mtllib room.mtl

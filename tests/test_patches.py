@@ -11,10 +11,7 @@ from radiosity.geometry import polygon_normals
 from radiosity.patches import Patches, planar_parts, subdivide_faces
 from radiosity.geometry import centroids_and_areas
 
-
-def _area(poly: np.ndarray) -> float:
-    centred = poly - poly.mean(axis=0)
-    return 0.5 * float(np.linalg.norm(np.cross(centred, np.roll(centred, -1, axis=0)).sum(axis=0)))
+from helpers import polygon_area
 
 
 def _longest_edge(quads: np.ndarray) -> float:
@@ -25,7 +22,7 @@ def _check(poly: np.ndarray, size: float | None) -> Patches:
     patches, report = subdivide_faces(poly, [np.arange(len(poly))], size)
     assert not report.degenerate and not report.nonplanar
     _, areas = centroids_and_areas(patches.quads)
-    assert areas.sum() == pytest.approx(_area(poly), rel=1e-12)
+    assert areas.sum() == pytest.approx(polygon_area(poly), rel=1e-12)
     assert (areas > 0).all()
     if size is not None:
         assert _longest_edge(patches.quads) <= size * (1 + 1e-9)
@@ -83,7 +80,7 @@ def test_nonplanar_quad_split_by_fan_from_first_vertex():
     patches, report = subdivide_faces(quad, [np.arange(4)], 0.3)
     assert report.nonplanar and report.nonplanar[0][0] == 0
     _, areas = centroids_and_areas(patches.quads)
-    assert areas.sum() == pytest.approx(_area(quad[[0, 1, 2]]) + _area(quad[[0, 2, 3]]), rel=1e-12)
+    assert areas.sum() == pytest.approx(polygon_area(quad[[0, 1, 2]]) + polygon_area(quad[[0, 2, 3]]), rel=1e-12)
     assert _longest_edge(patches.quads) <= 0.3 * (1 + 1e-9)
 
 
@@ -95,7 +92,7 @@ def test_nonplanar_quad_cells_meet_vertex_to_vertex_across_the_fold(size):
     patches, _ = subdivide_faces(quad, [np.arange(4)], size)
     quads = patches.quads
     _, areas = centroids_and_areas(quads)
-    assert areas.sum() == pytest.approx(_area(quad[[0, 1, 2]]) + _area(quad[[0, 2, 3]]), rel=1e-12)
+    assert areas.sum() == pytest.approx(polygon_area(quad[[0, 1, 2]]) + polygon_area(quad[[0, 2, 3]]), rel=1e-12)
     assert _longest_edge(quads) <= size * (1 + 1e-9)
     for q in quads:  # each patch is planar
         assert planar_parts(q if not (q[3] == q[2]).all() else q[:3], 1.0)[1] == 0.0
@@ -129,7 +126,7 @@ def test_nonconvex_face_triangulated():
 @given(st.lists(st.floats(-1, 1), min_size=6, max_size=6), st.floats(0.05, 0.7))
 def test_random_triangles(coords, size):
     tri = np.array([[coords[0], coords[1], 0.0], [coords[2], coords[3], 0.0], [coords[4], coords[5], 0.0]])
-    if _area(tri) < 1e-3:
+    if polygon_area(tri) < 1e-3:
         return
     if np.cross(tri[1] - tri[0], tri[2] - tri[0])[2] < 0:
         tri = tri[::-1].copy()

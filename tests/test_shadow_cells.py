@@ -13,12 +13,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from helpers import BLOCKED_PARALLEL_SQUARES
+from helpers import BLOCKED_PARALLEL_SQUARES, fill, grid, plate_total
 
 pytest.importorskip("embreex")
 
 from radiosity.methods.uniform.assembly import FillSettings  # noqa: E402
-from test_assembly import fill, grid, plate_total  # noqa: E402
 
 BLOCKER = (0.25, 0.75)  # the blocker's x and y range, at height 0.5
 # view_factors' defaults (formfactor_rtol, visibility_rtol 1e-6; "auto" sends these pairs to exact)

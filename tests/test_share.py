@@ -19,8 +19,7 @@ from radiosity.io.export import linear_colours, triangles, write_glb
 from radiosity.io.html import page_data, write_html
 from radiosity.viz import auto_exposure
 
-DATA = Path(__file__).parent / "data"
-ROOM = DATA / "room.obj"
+from helpers import ROOM
 RUN_PAGE = Path(__file__).parent / "js" / "run_page.js"
 
 

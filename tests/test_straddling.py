@@ -12,7 +12,7 @@ pytest.importorskip("embreex")
 
 import radiosity  # noqa: E402
 from radiosity.methods.uniform.assembly import FillSettings  # noqa: E402
-from test_assembly import fill  # noqa: E402
+from helpers import fill  # noqa: E402
 
 FLOOR = np.array([[[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]], float)  # faces +z
 WALL = np.array([[[1.2, 0, -0.5], [1.2, 0, 1], [1.2, 1, 1], [1.2, 1, -0.5]]], float)  # faces -x, crosses z = 0

@@ -7,12 +7,11 @@ import numpy as np
 import pytest
 from hypothesis import given, settings as hsettings, strategies as st
 
-from helpers import PARALLEL_SQUARES
+from helpers import PARALLEL_SQUARES, fill, grid
 
 pytest.importorskip("embreex")
 
 from radiosity.methods.uniform.assembly import FillSettings  # noqa: E402
-from test_assembly import fill, grid  # noqa: E402
 
 TIGHT = FillSettings(formfactor_rtol=1e-6, visibility_rtol=1e-6)  # view_factors' defaults
 DEFAULT = FillSettings(formfactor_rtol=1e-4)  # the default preset's accuracy (rays and exact)

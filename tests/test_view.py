@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from radiosity.cli import main
 
-ROOM = Path(__file__).parent / "data" / "room.obj"
+from helpers import ROOM
 
 
 @pytest.fixture(scope="module")

@@ -8,27 +8,8 @@ import pytest
 import radiosity
 from radiosity.io.view3d import read_vs3, write_vs3
 
-PLATES = """T parallel plates with a blocker
-C eps=1e-4
-F 3
-! the lower plate faces up, the upper one down
-V 1 0 0 0
-V 2 1 0 0
-V 3 1 1 0
-V 4 0 1 0
-V 5 0 0 1
-V 6 0 1 1
-V 7 1 1 1
-V 8 1 0 1
-V 9 0.25 0.25 0.5
-V 10 0.75 0.25 0.5
-V 11 0.75 0.75 0.5
-V 12 0.25 0.75 0.5
-S 1 1 2 3 4 0 0 0.9 lower
-S 2 5 6 7 8 0 0 0.8 upper
-O 3 9 10 11 12 0 0 0 blocker
-E
-"""
+from helpers import PLATES
+
 
 
 @pytest.fixture()

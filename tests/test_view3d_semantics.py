@@ -8,38 +8,8 @@ import pytest
 import radiosity
 from radiosity.io.view3d import read_vs3
 
-# A 4 x 3 x 2.5 m room, every surface facing in; a door (on the floor edge) and a window in the
-# south wall (y = 0) are its subsurfaces (base 3). Comments after the data, as View3D allows.
-ROOM = """T room with a door and a window in the south wall
-C encl=1 eps=1e-6
-F 3
-V 1 0 0 0
-V 2 4 0 0
-V 3 4 3 0
-V 4 0 3 0
-V 5 0 0 2.5
-V 6 4 0 2.5
-V 7 4 3 2.5
-V 8 0 3 2.5
-V 9 0.5 0 0
-V 10 1.4 0 0
-V 11 1.4 0 2
-V 12 0.5 0 2
-V 13 2 0 1
-V 14 3.5 0 1
-V 15 3.5 0 2
-V 16 2 0 2
-!  #  v1 v2 v3 v4 base cmb emit name
-S 1   1  2  3  4   0   0  0.9  floor     ! faces up
-S 2   8  7  6  5   0   0  0.9  ceiling   ! faces down
-S 3   1  5  6  2   0   0  0.9  south     / faces north
-S 4   4  3  7  8   0   0  0.9  north
-S 5   1  4  8  5   0   0  0.9  west
-S 6   2  6  7  3   0   0  0.9  east
-S 7   9 12 11 10   3   0  0.6  door      ! in the south wall
-S 8  13 16 15 14   3   0  0.1  window
-E
-"""
+from helpers import CUBE_3A
+from helpers import ROOM_VS3 as ROOM
 
 
 def _write(tmp_path, text, name="model.vs3"):
@@ -127,30 +97,6 @@ def test_combined_surfaces_are_one_output_surface(tmp_path):
     np.testing.assert_allclose(out.row_sums, 1.0, atol=1e-6)
 
 
-# The same unit cube in format 3a: rectangles by origin, azimuth, tilt, width and height;
-# the north wall as a general quadrilateral, the top as two triangles; a blocker obstruction.
-CUBE_3A = """T unit cube, F 3a
-F 3a
-!  #  shape base cmb emit name
-S 1 R 0 0 0.5 bottom
-  1 1 0   0 0     1 1
-S 2 R 0 0 0.5 south   ! faces north (azimuth 0), vertical
-  1 0 0   0 90    1 1
-S 3 Q 0 0 0.5 north
-  0 1 0   180 90
-  0 0  1 0  1 1  0 1
-S 4 R 0 0 0.5 west
-  0 0 0   90 90   1 1
-S 5 R 0 0 0.5 east
-  1 1 0   270 90  1 1
-S 6 T 0 0 0.5 top
-  1 0 1   0 180   0 0  1 0  1 1
-S 7 T 0 6 0.5 top_b
-  1 0 1   0 180   0 0  1 1  0 1
-O 8 R
-  0.75 0.75 0.5  0 0  0.5 0.5
-E
-"""
 
 
 def test_format_3a_cube(tmp_path):

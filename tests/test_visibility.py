@@ -5,27 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from helpers import corner_point_factor
+from helpers import all_pairs, boxes_scene, corner_point_factor, make_vis, rect
 
 pytest.importorskip("embreex")
 
 from radiosity import _tol  # noqa: E402
-from radiosity.geometry import polygon_normals  # noqa: E402
-from radiosity.visibility import FREE, FULL, MAYBE, Visibility  # noqa: E402
+from radiosity.visibility import FREE, FULL, MAYBE  # noqa: E402
 from radiosity.visibility._embree import EmbreeOccluder  # noqa: E402
 from radiosity.visibility._occluders import build_occluders, classify_rows, classify_rows_numpy  # noqa: E402
-
-
-def rect(x0, x1, y0, y1, z, *, down=False):
-    q = np.array([[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]], float)
-    return q[::-1].copy() if down else q
-
-
-def make_vis(quads, groups=None, **kw):
-    quads = np.asarray(quads, float)
-    groups = np.arange(len(quads)) if groups is None else np.asarray(groups)
-    scale = float(np.linalg.norm(np.ptp(quads.reshape(-1, 3), axis=0)))
-    return Visibility(quads, polygon_normals(quads), groups, scale, **kw)
 
 
 # ---------------------------------------------------------------- Embree: shared edges and vertices
@@ -139,29 +126,6 @@ def test_adaptive_rays_refine_only_partial_pairs():
 
 
 # ---------------------------------------------------------------- compiled kernels vs references
-def boxes_scene():
-    """Floor, ceiling and two boxes (10 occluder faces) between them: a small Cornell box."""
-    from test_assembly import grid
-
-    def box(x0, x1, y0, y1, h):
-        c = [[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
-        faces = [rect(x0, x1, y0, y1, h)]
-        for k in range(4):
-            (a0, b0), (a1, b1) = c[k], c[(k + 1) % 4]
-            faces.append(np.array([[a0, b0, 0], [a1, b1, 0], [a1, b1, h], [a0, b0, h]], float))
-        return faces
-
-    parts = [grid(8, 0, down=False), grid(4, 1, down=True), np.array(box(0.2, 0.45, 0.2, 0.5, 0.6)),
-             np.array(box(0.55, 0.8, 0.4, 0.7, 0.35))]
-    groups = np.repeat(np.arange(len(parts)), [len(p) for p in parts])
-    return np.concatenate(parts), groups
-
-
-def all_pairs(n):
-    i, j = np.nonzero(~np.eye(n, dtype=bool))
-    return i, j
-
-
 def test_fused_classification_matches_numpy_reference():
     quads, groups = boxes_scene()
     vis = make_vis(quads, groups)

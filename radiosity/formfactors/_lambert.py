@@ -19,6 +19,7 @@ import numba as _numba
 import numpy as np
 
 from .. import _tol
+from .._geometry_kernels import newell
 
 _TWO_PI = 2.0 * np.pi
 
@@ -103,17 +104,11 @@ def _radius2_area(verts, count):
     """Largest squared distance of the first ``count`` vertices from the origin (the first
     vertex), and twice the polygon's vector area (Newell), for the scalar path."""
     r2max = 0.0
-    A0 = 0.0
-    A1 = 0.0
-    A2 = 0.0
     for i in range(count):
         r2 = verts[i, 0] * verts[i, 0] + verts[i, 1] * verts[i, 1] + verts[i, 2] * verts[i, 2]
         if r2 > r2max:
             r2max = r2
-        j = i + 1 if i + 1 < count else 0
-        A0 += verts[i, 1] * verts[j, 2] - verts[i, 2] * verts[j, 1]
-        A1 += verts[i, 2] * verts[j, 0] - verts[i, 0] * verts[j, 2]
-        A2 += verts[i, 0] * verts[j, 1] - verts[i, 1] * verts[j, 0]
+    A0, A1, A2 = newell(verts, count)
     return r2max, A0, A1, A2
 
 

@@ -27,6 +27,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from .._geometry_kernels import newell_z
+
 # numba's disk cache of this module's kernels holds the _exact_kernel helpers compiled in, and
 # is keyed on this file alone: a change there must touch this file too, or stale code runs.
 from ._exact_kernel import _classify_one, _lambert, _point_hidden
@@ -79,11 +81,7 @@ def _clip2(src, n, dst, a, b, c, eps):
 
 @njit(cache=True, inline="always")
 def _polygon_area2(poly, n):
-    s = 0.0
-    for k in range(n):
-        k2 = k + 1 if k + 1 < n else 0
-        s += poly[k, 0] * poly[k2, 1] - poly[k2, 0] * poly[k, 1]
-    return 0.5 * s
+    return 0.5 * newell_z(poly, n)
 
 
 @njit(cache=True, inline="always")

@@ -12,6 +12,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from .._geometry_kernels import newell
+
 _TWO_PI = 2.0 * math.pi
 
 
@@ -91,15 +93,10 @@ def point_factors(x, nx, polys, counts):
 @njit(cache=True, inline="always")
 def _thinner_than(poly, n, tol):
     """True if the planar polygon poly[:n] is no wider than tol (area <= tol x longest edge)."""
-    ax = 0.0
-    ay = 0.0
-    az = 0.0
+    ax, ay, az = newell(poly, n)
     longest = 0.0
     for k in range(n):
         k2 = k + 1 if k + 1 < n else 0
-        ax += poly[k, 1] * poly[k2, 2] - poly[k, 2] * poly[k2, 1]
-        ay += poly[k, 2] * poly[k2, 0] - poly[k, 0] * poly[k2, 2]
-        az += poly[k, 0] * poly[k2, 1] - poly[k, 1] * poly[k2, 0]
         ex = poly[k2, 0] - poly[k, 0]
         ey = poly[k2, 1] - poly[k, 1]
         ez = poly[k2, 2] - poly[k, 2]

@@ -13,8 +13,9 @@ import math
 import numpy as np
 from numba import njit, prange
 
-# numba's disk cache of this module's kernels holds the _exact_kernel helpers compiled in, and
-# is keyed on this file alone: a change there must touch this file too, or stale code runs.
+# numba's disk cache of this module's kernels holds the _exact_kernel helpers compiled in (and
+# the _geometry_kernels ones they inline), and is keyed on this file alone: a change there must
+# touch this file too, or stale code runs.
 from ._exact_kernel import _lambert, _meets, _point_hidden
 
 
