@@ -10,7 +10,7 @@ import numpy as np
 
 from . import _tol
 
-__all__ = ["vector_area", "vector_areas", "polygon_normals", "centroids_and_areas", "triangulate"]
+__all__ = ["vector_area", "vector_areas", "polygon_normals", "centroids_and_areas", "triangulate", "clip_slots"]
 
 
 def vector_areas(polys: np.ndarray) -> np.ndarray:
@@ -93,6 +93,25 @@ def centroids_and_areas(quads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     centroid = ((a + b + c) * area1[:, None] + (a + c + d) * area2[:, None]) / (3 * safe[:, None])
     centroid = np.where(area[:, None] > 0, centroid, quads.mean(axis=1))
     return centroid, area
+
+
+def clip_slots(poly: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One Sutherland-Hodgman step on many polygons at once, before compaction.
+
+    poly (r, k, 3) with values h (r, k) at its vertices; keeps h >= 0. Returns slots (r, 2k, 3)
+    (vertex k, then where edge k crosses h = 0) and which of them the clipped polygon keeps
+    (r, 2k); callers compact or pad the kept slots as their kernel needs.
+    """
+    r, k, _ = poly.shape
+    nxt = np.roll(poly, -1, axis=1)
+    h_next = np.roll(h, -1, axis=1)
+    keep = h >= 0.0
+    crosses = ((h > 0.0) & (h_next < 0.0)) | ((h < 0.0) & (h_next > 0.0))
+    t = np.where(crosses, h / np.where(crosses, h - h_next, 1.0), 0.0)
+    cut = poly + t[..., None] * (nxt - poly)
+    slots = np.stack([poly, cut], axis=2).reshape(r, 2 * k, 3)
+    valid = np.stack([keep, crosses], axis=2).reshape(r, 2 * k)
+    return slots, valid
 
 
 def triangulate(polygon: np.ndarray) -> np.ndarray:

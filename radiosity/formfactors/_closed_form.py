@@ -17,7 +17,7 @@ import numpy as np
 from .. import _memory, _tol
 from ._lambert import _lambert_indexed_kernel, _lambert_matrix_kernel, _lambert_rows_kernel
 from .._validate import as_points, as_polygon, as_unit_vectors
-from ..geometry import polygon_normals
+from ..geometry import clip_slots, polygon_normals
 
 __all__ = ["point_to_polygon", "point_to_polygons", "lambert_pairs", "lambert_indexed"]
 
@@ -251,14 +251,7 @@ def _clip_to_upper(rel: np.ndarray, height: np.ndarray) -> np.ndarray:
     and the edge sum needs no masks.
     """
     rows, k, _ = rel.shape
-    nxt = np.roll(rel, -1, axis=1)
-    h_next = np.roll(height, -1, axis=1)
-    keep = height >= 0.0
-    crosses = (height > 0.0) & (h_next < 0.0) | (height < 0.0) & (h_next > 0.0)
-    t = np.where(crosses, height / np.where(crosses, height - h_next, 1.0), 0.0)
-    cut = rel + t[..., None] * (nxt - rel)
-    slots = np.stack([rel, cut], axis=2).reshape(rows, 2 * k, 3)
-    valid = np.stack([keep, crosses], axis=2).reshape(rows, 2 * k)
+    slots, valid = clip_slots(rel, height)
     # Rotate each row so that slot 0 is valid, then forward-fill the invalid slots.
     first = valid.argmax(axis=1)
     order = (first[:, None] + np.arange(2 * k)[None, :]) % (2 * k)

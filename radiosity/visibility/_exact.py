@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry import clip_slots
 from ._constants import MAX_UNION, SNAP_REL
 
 __all__ = ["clip_convex", "hidden_factors", "point_factors", "union_factors"]
@@ -36,14 +37,7 @@ def clip_convex(poly: np.ndarray, h: np.ndarray) -> np.ndarray:
     r, k, _ = poly.shape
     scale = np.abs(h).max(axis=1, keepdims=True)
     h = np.where(np.abs(h) <= 1e-13 * scale, 0.0, h)  # vertices on the line: no spurious crossings
-    nxt = np.roll(poly, -1, axis=1)
-    h_next = np.roll(h, -1, axis=1)
-    keep = h >= 0.0
-    crosses = ((h > 0.0) & (h_next < 0.0)) | ((h < 0.0) & (h_next > 0.0))
-    t = np.where(crosses, h / np.where(crosses, h - h_next, 1.0), 0.0)
-    cut = poly + t[..., None] * (nxt - poly)
-    slots = np.stack([poly, cut], axis=2).reshape(r, 2 * k, 3)
-    valid = np.stack([keep, crosses], axis=2).reshape(r, 2 * k)
+    slots, valid = clip_slots(poly, h)
     order = np.argsort(~valid, axis=1, kind="stable")[:, :k + 1]
     out = np.take_along_axis(slots, order[..., None], axis=1)
     count = valid.sum(axis=1)
