@@ -75,9 +75,9 @@ def test_rtol_bounds_the_error_against_exact_shadows(cornell):
     rng = np.random.default_rng(3)
     points = np.column_stack([rng.uniform(0, 0.55, 200), np.zeros(200), rng.uniform(0, 0.55, 200)])
     normals = np.tile(UP, (200, 1))
-    exact = cornell.irradiance(points, normals, rtol=0.0)
+    exact = cornell.irradiance(points, normals, sensor_rtol=0.0)
     for rtol in (1e-3, 1e-2):
-        got = cornell.irradiance(points, normals, rtol=rtol)
+        got = cornell.irradiance(points, normals, sensor_rtol=rtol)
         assert (np.abs(got - exact) <= rtol * exact + 1e-12).all()
 
 
@@ -168,4 +168,4 @@ def test_huge_and_tiny_normals_keep_their_direction(cornell):
 def test_bad_rtol_is_refused(cornell):
     for bad in (-1e-3, 1.0, float("nan")):
         with pytest.raises(ValueError, match="rtol"):
-            cornell.irradiance(PENUMBRA[:1], UP[None], rtol=bad)
+            cornell.irradiance(PENUMBRA[:1], UP[None], sensor_rtol=bad)
