@@ -24,6 +24,7 @@ import numba as _numba
 import numpy as np
 
 from ...formfactors import _quadrature as quadrature
+from ...formfactors._quadrature import _pair_rho
 from ...formfactors._lambert import _G_SIZE, _SRC_LANES, _source_block
 
 __all__ = ["block_pairs", "reciprocal_pairs", "mirrored", "rows_to_csr", "once_factors", "raw_ratio", "separated_factors", "MAX_ORDER"]
@@ -248,20 +249,8 @@ def _list_pairs(quads, normals, centroid, area, offset, radius, rows, live, star
 
 def _apriori_order(quads, normals, centroid, radius, a, b, orders, need):
     """``quadrature._pair_setup_loop`` for one pair (receiver a, source b): 0 or the order."""
-    d0, d1, d2 = centroid[b, 0] - centroid[a, 0], centroid[b, 1] - centroid[a, 1], centroid[b, 2] - centroid[a, 2]
-    dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-    safe = max(dist, _TINY)
-    u0, u1, u2 = d0 / safe, d1 / safe, d2 / safe
-    cos_rec = abs(normals[a, 0] * u0 + normals[a, 1] * u1 + normals[a, 2] * u2)
-    cos_src = abs(normals[b, 0] * u0 + normals[b, 1] * u1 + normals[b, 2] * u2)
-    rho = (dist - radius[b]) / max(radius[a], _TINY) * min(cos_rec, cos_src)
-    h_lo, h_hi = np.inf, -np.inf
-    for k in range(quads.shape[1]):
-        h = ((quads[a, k, 0] - centroid[b, 0]) * normals[b, 0] + (quads[a, k, 1] - centroid[b, 1]) * normals[b, 1]
-             + (quads[a, k, 2] - centroid[b, 2]) * normals[b, 2])
-        h_lo, h_hi = min(h_lo, h), max(h_hi, h)
-    tol_h = 1e-12 * (radius[a] + radius[b])
-    if (h_hi > tol_h and h_lo < -tol_h) or not rho > 1.5:
+    rho, crossing = _pair_rho(quads, normals, centroid, radius, centroid, normals, radius, a, b)
+    if crossing or not rho > 1.5:
         return 0
     for q in range(len(orders)):
         if rho >= need[q]:
