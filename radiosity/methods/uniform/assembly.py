@@ -156,6 +156,8 @@ def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettin
     from ...visibility import FULL, MAYBE
     from ...visibility._constants import MAX_CELL_OCCLUDERS, SHADOW_CELLS_BELOW, SHADOW_RTOL_SHARE
 
+    if visibility.cull and visibility.n_occluders == 0:  # nothing can block: every pair is free
+        return
     nz = np.flatnonzero(f > 0)
     if half is None:
         status, rows, occ = visibility.classify(i[nz], j[nz])
@@ -262,7 +264,7 @@ def fill_block(quads, normals, centroid, area, visibility, settings: FillSetting
         return empty, empty, np.zeros(0), stats
     t0 = time.perf_counter()
     f = once_factors(quads, normals, centroid, area, i, j, rtol=settings.formfactor_rtol,
-                     max_points=_tol.PAIR_MAX_POINTS, order=order)
+                     max_points=_tol.PAIR_MAX_POINTS, order=order, two_area=True)
     t1 = time.perf_counter()
     stats.seconds_formfactors += t1 - t0
     if visibility is not None:
