@@ -73,13 +73,20 @@ def block_pairs(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, ar
     orders = np.array(quadrature._APRIORI_ORDERS, dtype=np.int64)
     # the bound C rho^(-2p) <= rtol / SAFETY  <=>  rho >= (C SAFETY / rtol)^(1 / 2p)
     need = (quadrature._APRIORI_C * quadrature._APRIORI_SAFETY / rtol) ** (1.0 / (2.0 * orders))
+    # one facing test per pair: each row writes into room for all its partners j > i, then the
+    # rows are packed (a counting pass first cost a second test of every pair)
+    room = np.zeros(len(rows) + 1, np.int64)
+    room[1:] = np.cumsum(np.maximum(n - 1 - rows, 0))
     counts = np.zeros(len(rows) + 1, np.int64)
-    _count_pairs(quads, normals, offset, radius, rows, live, counts)
+    rec, src, order = np.empty(room[-1], np.int64), np.empty(room[-1], np.int64), np.empty(room[-1], np.int64)
+    _list_pairs(quads, normals, centroid, area, offset, radius, rows, live, room, orders, need, rec, src, order,
+                counts)
     starts = np.cumsum(counts)
-    m = int(starts[-1])
-    rec, src, order = np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m, np.int64)
-    _list_pairs(quads, normals, centroid, area, offset, radius, rows, live, starts, orders, need, rec, src, order)
-    return rec, src, order
+    if starts[-1] == room[-1]:
+        return rec, src, order
+    packed = [np.empty(starts[-1], np.int64) for _ in range(3)]
+    _pack_rows(room, starts, rec, src, order, *packed)
+    return tuple(packed)
 
 
 def mirrored(area: np.ndarray, i: np.ndarray, j: np.ndarray, f: np.ndarray, drop: float
@@ -218,26 +225,16 @@ def _balanced(t, n):
     return t // 2 if t % 2 == 0 else n - 1 - t // 2
 
 
-def _count_pairs(quads, normals, offset, radius, rows, live, counts):
-    """counts[r + 1] = pairs {rows[r], j > rows[r]} that are both live and face each other."""
-    for t in _prange(len(rows)):
-        r = _balanced(t, len(rows))
-        i = rows[r]
-        c = 0
-        if live[i]:
-            for j in range(i + 1, len(quads)):
-                if live[j] and _facing(quads, normals, offset, radius, i, j):
-                    c += 1
-        counts[r + 1] = c
-
-
-def _list_pairs(quads, normals, centroid, area, offset, radius, rows, live, starts, orders, need, rec, src, order):
-    """The pairs :func:`_count_pairs` counted, oriented, with ``quadrature._pair_setup_loop``'s
-    order (0 for receivers crossing the source's plane or rho <= 1.5)."""
+def _list_pairs(quads, normals, centroid, area, offset, radius, rows, live, room, orders, need, rec, src, order,
+                counts):
+    """The pairs {rows[r], j > rows[r]}, both live and facing each other, oriented, with
+    ``quadrature._pair_setup_loop``'s order (0 for receivers crossing the source's plane or
+    rho <= 1.5): row r's from ``room[r]`` on, their number in ``counts[r + 1]``."""
     for s in _prange(len(rows)):
         r = _balanced(s, len(rows))
         i = rows[r]
-        t = starts[r]
+        t = room[r]
+        counts[r + 1] = 0
         if not live[i]:
             continue
         for j in range(i + 1, len(quads)):
@@ -247,6 +244,16 @@ def _list_pairs(quads, normals, centroid, area, offset, radius, rows, live, star
             rec[t], src[t] = a, b
             order[t] = _apriori_order(quads, normals, centroid, radius, a, b, orders, need)
             t += 1
+        counts[r + 1] = t - room[r]
+
+
+def _pack_rows(room, starts, rec, src, order, rec_out, src_out, order_out):
+    """Row r's listed pairs, from room[r], to starts[r] in the packed arrays."""
+    for r in _prange(len(room) - 1):
+        for k in range(starts[r + 1] - starts[r]):
+            rec_out[starts[r] + k] = rec[room[r] + k]
+            src_out[starts[r] + k] = src[room[r] + k]
+            order_out[starts[r] + k] = order[room[r] + k]
 
 
 def _apriori_order(quads, normals, centroid, radius, a, b, orders, need):
@@ -590,8 +597,8 @@ _balanced = _numba.njit(cache=True, inline="always")(_balanced)
 _in_front = _numba.njit(cache=True, inline="always")(_in_front)
 _facing = _numba.njit(cache=True, inline="always")(_facing)
 _apriori_order = _numba.njit(cache=True, inline="always", error_model="numpy")(_apriori_order)
-_count_pairs = _TwoWays(_count_pairs, lambda quads, *a: len(a[3]) * len(quads) // 2, error_model="numpy")
 _list_pairs = _TwoWays(_list_pairs, lambda *a: len(a[11]), error_model="numpy")
+_pack_rows = _TwoWays(_pack_rows, lambda *a: len(a[2]))
 _put_points = _numba.njit(cache=True, inline="always", error_model="numpy")(_put_points)
 _copy_points = _numba.njit(cache=True, inline="always")(_copy_points)
 _table_slots = _numba.njit(cache=True)(_table_slots)

@@ -312,7 +312,9 @@ def assemble(quads, normals, centroid, area, visibility, settings: FillSettings,
 
 def coo_parts_to_csr(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]], n: int) -> sp.csr_matrix:
     """The (n, n) CSR matrix of blocks' (i, j, v), in block order (the same order, the same bits)."""
-    if parts:
+    if len(parts) == 1:  # no copy
+        i, j, v = parts[0]
+    elif parts:
         i, j, v = (np.concatenate(p) for p in zip(*parts))
     else:
         i = j = np.zeros(0, np.int64)
