@@ -27,7 +27,7 @@ from ...formfactors import _quadrature as quadrature
 from ...formfactors._quadrature import _pair_rho
 from ...formfactors._lambert import _G_SIZE, _SRC_LANES, _source_block
 
-__all__ = ["block_pairs", "reciprocal_pairs", "mirrored", "rows_to_csr", "once_factors", "raw_ratio", "separated_factors", "MAX_ORDER", "TWO_AREA_MAX_ORDER", "two_area_need"]
+__all__ = ["block_pairs", "reciprocal_pairs", "mirrored", "rows_to_csr", "parts_to_csr", "once_factors", "raw_ratio", "separated_factors", "MAX_ORDER", "TWO_AREA_MAX_ORDER", "two_area_need"]
 
 _prange = _numba.prange  # the loops below are compiled with parallel=True (see _TwoWays)
 MAX_ORDER = max(quadrature._APRIORI_ORDERS)
@@ -151,14 +151,27 @@ def rows_to_csr(i: np.ndarray, j: np.ndarray, v: np.ndarray, n: int):
     scipy's COO checks, conversion and canonicalisation (a quarter of the plates' fill).
     The same matrix, bit for bit (canonical: sorted columns). None if (i, j) repeats, or if
     the matrix would need 64-bit indices: the caller then asks scipy."""
+    return parts_to_csr([(i, j, v)], n)
+
+
+def parts_to_csr(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]], n: int):
+    """:func:`rows_to_csr` of the concatenated parts (i, j, v), without concatenating them: each
+    part is counted and scattered in place (the fill's blocks, 48 MB a block on the plates)."""
     import scipy.sparse as sp
 
-    if len(i) >= 2**31 - 1 or n >= 2**31 - 1:
+    parts = [(np.asarray(i, np.int64), np.asarray(j, np.int64), np.asarray(v, float)) for i, j, v in parts]
+    total = sum(len(i) for i, _, _ in parts)
+    if total >= 2**31 - 1 or n >= 2**31 - 1:
         return None
     indptr = np.zeros(n + 1, np.int32)
-    indices = np.empty(len(i), np.int32)
-    data = np.empty(len(i))
-    _scatter_rows(np.asarray(i, np.int64), np.asarray(j, np.int64), np.asarray(v, float), indptr, indices, data)
+    indices = np.empty(total, np.int32)
+    data = np.empty(total)
+    for i, _, _ in parts:
+        _count_rows(i, indptr)
+    _cumulate(indptr)
+    fill = indptr[:-1].copy()
+    for i, j, v in parts:
+        _place_rows(i, j, v, fill, indices, data)
     if not _sort_rows(indptr, indices, data):
         return None
     F = sp.csr_matrix((data, indices, indptr), shape=(n, n))
@@ -167,13 +180,19 @@ def rows_to_csr(i: np.ndarray, j: np.ndarray, v: np.ndarray, n: int):
     return F
 
 
-def _scatter_rows(i, j, v, indptr, indices, data):
-    """Entries grouped by row, in input order within a row (indptr counted here)."""
+def _count_rows(i, indptr):
+    """indptr[r + 1] += entries of row r in i."""
     for t in range(len(i)):
         indptr[i[t] + 1] += 1
+
+
+def _cumulate(indptr):
     for r in range(len(indptr) - 1):
         indptr[r + 1] += indptr[r]
-    fill = indptr[:-1].copy()
+
+
+def _place_rows(i, j, v, fill, indices, data):
+    """Entries grouped by row, in input order within a row: fill[r] is row r's next free slot."""
     for t in range(len(i)):
         r = i[t]
         indices[fill[r]], data[fill[r]] = j[t], v[t]
@@ -588,7 +607,9 @@ class _TwoWays:
 
 # The plain functions above are compiled here (the serial and parallel builds of _TwoWays).
 _task_starts = _numba.njit(cache=True)(_task_starts)
-_scatter_rows = _numba.njit(cache=True)(_scatter_rows)
+_count_rows = _numba.njit(cache=True)(_count_rows)
+_cumulate = _numba.njit(cache=True)(_cumulate)
+_place_rows = _numba.njit(cache=True)(_place_rows)
 _mirror_value = _numba.njit(cache=True, inline="always")(_mirror_value)
 _count_kept = _numba.njit(cache=True)(_count_kept)
 _write_mirrored = _numba.njit(cache=True)(_write_mirrored)

@@ -19,7 +19,7 @@ from ... import _tol
 from ..._memory import FILL_PAIRS
 from ...options import Options
 from ...formfactors import pair_factors
-from ._fill_kernel import block_pairs, mirrored, once_factors, rows_to_csr
+from ._fill_kernel import block_pairs, mirrored, once_factors, parts_to_csr
 
 __all__ = ["FillSettings", "FillStats", "candidate_pairs", "unoccluded_factors", "fill_block", "assemble"]
 
@@ -312,12 +312,8 @@ def assemble(quads, normals, centroid, area, visibility, settings: FillSettings,
 
 def coo_parts_to_csr(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]], n: int) -> sp.csr_matrix:
     """The (n, n) CSR matrix of blocks' (i, j, v), in block order (the same order, the same bits)."""
-    if len(parts) == 1:  # no copy
-        i, j, v = parts[0]
-    elif parts:
-        i, j, v = (np.concatenate(p) for p in zip(*parts))
-    else:
-        i = j = np.zeros(0, np.int64)
-        v = np.zeros(0)
-    fast = rows_to_csr(i, j, v, n)
-    return fast if fast is not None else sp.csr_matrix((v, (i, j)), shape=(n, n))
+    fast = parts_to_csr(parts, n)
+    if fast is not None:
+        return fast
+    i, j, v = (np.concatenate(p) for p in zip(*parts))
+    return sp.csr_matrix((v, (i, j)), shape=(n, n))
