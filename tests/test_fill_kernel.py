@@ -162,3 +162,54 @@ def test_mirrored_is_the_concatenated_mirror(n, m, seed, drop):
     np.testing.assert_array_equal(got_v, rv[keep])  # bit for bit
     assert got_i.dtype == got_j.dtype == np.int64
     assert dropped == pytest.approx(float((rv[~keep] * area[ri[~keep]]).sum()), rel=1e-12, abs=1e-300)
+
+
+def _facing_random_pairs(m: int, seed: int) -> np.ndarray:
+    """(2 m, 4, 3): pairs (2k, 2k + 1) of random parallelograms and triangles (a repeated last
+    vertex) facing each other, sizes 0.1..10 and ratios 0.1..10, 1 to 300 sizes apart."""
+    rng = np.random.default_rng(seed)
+    quads = np.empty((2 * m, 4, 3))
+    for k in range(2 * m):
+        size = 10 ** rng.uniform(-1, 1)
+        centre = np.zeros(3) if k % 2 == 0 else rng.normal(size=3)
+        if k % 2:
+            centre *= 10 ** rng.uniform(0.5, 3.0) / np.linalg.norm(centre)
+        n = rng.normal(size=3)
+        t = np.cross(n, rng.normal(size=3))
+        t /= np.linalg.norm(t)
+        s = np.cross(n / np.linalg.norm(n), t)
+        a, b, shear = rng.uniform(0.3, 1.0) * size, rng.uniform(0.3, 1.0) * size, rng.uniform(-0.5, 0.5) * size
+        p0 = centre - 0.5 * a * t - 0.5 * b * s
+        quads[k] = [p0, p0 + a * t, p0 + a * t + b * s + shear * t, p0 + b * s + shear * t]
+        if rng.random() < 0.4:
+            quads[k, 3] = quads[k, 2]
+    normals = polygon_normals(quads)
+    centroid, _ = centroids_and_areas(quads)
+    d = centroid[1::2] - centroid[::2]
+    triangle = np.all(quads[:, 3] == quads[:, 2], axis=1)
+    for k, sign in ((0, 1.0), (1, -1.0)):  # each faces the other: reverse the winding where not
+        flip = np.flatnonzero(sign * np.einsum("mc,mc->m", normals[k::2], d) < 0) * 2 + k
+        quads[flip] = np.where(triangle[flip, None, None], quads[flip][:, [0, 2, 1, 1]], quads[flip][:, [0, 3, 2, 1]])
+    return np.ascontiguousarray(quads)
+
+
+@pytest.mark.parametrize("rtol", [1e-4, 1e-6])
+def test_two_area_rule_meets_rtol(rtol):
+    """Gauss points on both patches (the point-to-point kernel) where the source's a-priori
+    bound allows: within rtol of the exact factor, on most random separated pairs."""
+    quads = _facing_random_pairs(400, seed=3)
+    normals, centroid, area = geometry(quads)
+    assert np.all(np.einsum("mc,mc->m", normals[::2], centroid[1::2] - centroid[::2]) > 0)
+    assert np.all(np.einsum("mc,mc->m", normals[1::2], centroid[1::2] - centroid[::2]) < 0)
+    i, j = np.arange(0, len(quads), 2), np.arange(1, len(quads), 2)
+    radius = _radius(quads, centroid)
+    crossing, order = _pair_setup(quads, normals, centroid, radius, centroid, normals, radius, i, j, rtol)
+    sel = (order > 0) & ~crossing
+    i, j, order = i[sel], j[sel], order[sel]
+    two = separated_factors(quads, normals, centroid, area, i, j, order, _MODES["fill"], two_area_rtol=rtol)
+    lambert = separated_factors(quads, normals, centroid, area, i, j, order, _MODES["fill"])
+    exact = pair_factors(quads, normals, centroid, area, i, j, rtol=1e-11, mode="fill")
+    assert np.all(exact > 0)
+    used = two != lambert
+    assert used.sum() > 0.5 * len(i)
+    assert np.max(np.abs(two - exact) / exact) <= rtol

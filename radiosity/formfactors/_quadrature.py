@@ -240,26 +240,33 @@ def _pair_setup(quads, normals, centroid, r_rec, s_cen, s_nrm, r_src, i, j, rtol
     return crossing, order
 
 
+def _pair_rho(quads, normals, centroid, r_rec, s_cen, s_nrm, r_src, a, b):
+    """(rho, crossing) of receiver a and source b, as :func:`_pair_setup` defines them.
+
+    The one place this geometry is computed: the fill's pair listing
+    (``methods/uniform/_fill_kernel._apriori_order``) calls it too, so both choose the same orders.
+    """
+    d0, d1, d2 = s_cen[b, 0] - centroid[a, 0], s_cen[b, 1] - centroid[a, 1], s_cen[b, 2] - centroid[a, 2]
+    dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    safe = max(dist, _TINY)
+    u0, u1, u2 = d0 / safe, d1 / safe, d2 / safe
+    cos_rec = abs(normals[a, 0] * u0 + normals[a, 1] * u1 + normals[a, 2] * u2)
+    cos_src = abs(s_nrm[b, 0] * u0 + s_nrm[b, 1] * u1 + s_nrm[b, 2] * u2)
+    rho = (dist - r_src[b]) / max(r_rec[a], _TINY) * min(cos_rec, cos_src)
+    h_lo, h_hi = np.inf, -np.inf
+    for k in range(quads.shape[1]):
+        h = ((quads[a, k, 0] - s_cen[b, 0]) * s_nrm[b, 0] + (quads[a, k, 1] - s_cen[b, 1]) * s_nrm[b, 1]
+             + (quads[a, k, 2] - s_cen[b, 2]) * s_nrm[b, 2])
+        h_lo, h_hi = min(h_lo, h), max(h_hi, h)
+    tol_h = 1e-12 * (r_rec[a] + r_src[b])
+    return rho, (h_hi > tol_h and h_lo < -tol_h)
+
+
 def _pair_setup_loop(quads, normals, centroid, r_rec, s_cen, s_nrm, r_src, i, j, orders, limit,
                      crossing, order):
     """Loop body of :func:`_pair_setup` (compiled by numba when available)."""
-    tiny = _TINY
     for p in _prange(len(i)):
-        a, b = i[p], j[p]
-        d0, d1, d2 = s_cen[b, 0] - centroid[a, 0], s_cen[b, 1] - centroid[a, 1], s_cen[b, 2] - centroid[a, 2]
-        dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        safe = max(dist, tiny)
-        u0, u1, u2 = d0 / safe, d1 / safe, d2 / safe
-        cos_rec = abs(normals[a, 0] * u0 + normals[a, 1] * u1 + normals[a, 2] * u2)
-        cos_src = abs(s_nrm[b, 0] * u0 + s_nrm[b, 1] * u1 + s_nrm[b, 2] * u2)
-        rho = (dist - r_src[b]) / max(r_rec[a], tiny) * min(cos_rec, cos_src)
-        h_lo, h_hi = np.inf, -np.inf
-        for k in range(quads.shape[1]):
-            h = ((quads[a, k, 0] - s_cen[b, 0]) * s_nrm[b, 0] + (quads[a, k, 1] - s_cen[b, 1]) * s_nrm[b, 1]
-                 + (quads[a, k, 2] - s_cen[b, 2]) * s_nrm[b, 2])
-            h_lo, h_hi = min(h_lo, h), max(h_hi, h)
-        tol_h = 1e-12 * (r_rec[a] + r_src[b])
-        crossing[p] = h_hi > tol_h and h_lo < -tol_h
+        rho, crossing[p] = _pair_rho(quads, normals, centroid, r_rec, s_cen, s_nrm, r_src, i[p], j[p])
         order[p] = 0
         if rho > 1.5 and not crossing[p]:
             for q in range(len(orders)):  # the bound falls with p: the first order meeting it
@@ -273,6 +280,7 @@ def _receiver_heights(quads, s_cen, s_nrm, i, j):
     return np.einsum("mkc,mc->mk", quads[i] - s_cen[j][:, None, :], s_nrm[j])
 
 
+_pair_rho = _numba.njit(cache=True, inline="always", error_model="numpy")(_pair_rho)
 _pair_setup_loop = _numba.njit(cache=True, parallel=True, error_model="numpy")(_pair_setup_loop)
 
 

@@ -19,7 +19,7 @@ from ... import _tol
 from ..._memory import FILL_PAIRS
 from ...options import Options
 from ...formfactors import pair_factors
-from ._fill_kernel import block_pairs, mirrored, once_factors, rows_to_csr
+from ._fill_kernel import block_pairs, mirrored, once_factors, parts_to_csr
 
 __all__ = ["FillSettings", "FillStats", "candidate_pairs", "unoccluded_factors", "fill_block", "assemble"]
 
@@ -156,6 +156,8 @@ def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettin
     from ...visibility import FULL, MAYBE
     from ...visibility._constants import MAX_CELL_OCCLUDERS, SHADOW_CELLS_BELOW, SHADOW_RTOL_SHARE
 
+    if visibility.cull and visibility.n_occluders == 0:  # nothing can block: every pair is free
+        return
     nz = np.flatnonzero(f > 0)
     if half is None:
         status, rows, occ = visibility.classify(i[nz], j[nz])
@@ -262,7 +264,7 @@ def fill_block(quads, normals, centroid, area, visibility, settings: FillSetting
         return empty, empty, np.zeros(0), stats
     t0 = time.perf_counter()
     f = once_factors(quads, normals, centroid, area, i, j, rtol=settings.formfactor_rtol,
-                     max_points=_tol.PAIR_MAX_POINTS, order=order)
+                     max_points=_tol.PAIR_MAX_POINTS, order=order, two_area=True)
     t1 = time.perf_counter()
     stats.seconds_formfactors += t1 - t0
     if visibility is not None:
@@ -310,10 +312,8 @@ def assemble(quads, normals, centroid, area, visibility, settings: FillSettings,
 
 def coo_parts_to_csr(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]], n: int) -> sp.csr_matrix:
     """The (n, n) CSR matrix of blocks' (i, j, v), in block order (the same order, the same bits)."""
-    if parts:
-        i, j, v = (np.concatenate(p) for p in zip(*parts))
-    else:
-        i = j = np.zeros(0, np.int64)
-        v = np.zeros(0)
-    fast = rows_to_csr(i, j, v, n)
-    return fast if fast is not None else sp.csr_matrix((v, (i, j)), shape=(n, n))
+    fast = parts_to_csr(parts, n)
+    if fast is not None:
+        return fast
+    i, j, v = (np.concatenate(p) for p in zip(*parts))
+    return sp.csr_matrix((v, (i, j)), shape=(n, n))
