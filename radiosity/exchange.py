@@ -185,7 +185,8 @@ def exchange(scene: Scene, *, emissivity: Condition, temperature: Condition | No
         "auto" enforces reciprocity, and closure too when there is no ambient, so energy is
         conserved to the solver's precision. "none" uses F as given. "closure" asserts the
         scene is closed: rows short of 1 by more than ``CLOSURE_TOL`` are scaled up instead of
-        refused (with no ambient).
+        refused (with no ambient), and rows above ``1 + CLOSURE_TOL`` (refused otherwise) are
+        scaled down, with a warning naming the worst.
     **options
         Passed to :func:`radiosity.view_factors` when ``view_factors`` is None (``preset``,
         ``cache``, ``formfactor_rtol``, ...); ``max_patch_size`` is refused (load the scene
@@ -390,9 +391,14 @@ def _closed(Fa: sp.csr_matrix, scene: Scene, idx: np.ndarray, ambient: float | N
     if (short < -CLOSURE_TOL).any():
         worst = int(np.argmin(short))
         i = int(idx[worst])
-        msg = (f"view factors of patch {i} (object {scene.objects[scene.patch_object[i]]!r}) sum to "
-               f"{rows[worst]:.6g} > 1: the matrix is not accurate enough for an exchange")
-        raise ValueError(msg)
+        where = f"view factors of patch {i} (object {scene.objects[scene.patch_object[i]]!r}) sum to {rows[worst]:.6g}"
+        if enforce != "closure":
+            raise ValueError(f"{where} > 1: the matrix is not accurate enough for an exchange; "
+                             'enforce="closure" scales such rows to 1 if the scene is closed')
+        # Asked for explicitly: the user vouches that the enclosure is closed, so a row above 1
+        # is fill error like a row below it, and closure scales both to 1.
+        warnings.warn(f"exchange: {where}; scaled to 1 with the other rows (enforce='closure')",
+                      RadiosityWarning, stacklevel=3)
     if enforce == "auto":
         enforce = "reciprocity" if ambient is not None else "closure"
     if enforce != "none" and Fa.shape[0] > 0:
