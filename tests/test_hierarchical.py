@@ -204,3 +204,49 @@ def test_unknown_method_is_refused():
     scene = radiosity.load_scene(radiosity.bundled_scene("unit_cube"))
     with pytest.raises(TypeError, match="unknown method 'radial'"):
         radiosity.solve(scene, method="radial", cache=False)
+
+
+# ---------------------------------------------------------------------------------- clustering
+@pytest.fixture
+def clustered(monkeypatch):
+    """Cluster even small scenes (the solve clusters from CLUSTER_MIN_ROOTS input patches on)."""
+    import radiosity.methods.hierarchical._hierarchy as hierarchy
+
+    monkeypatch.setattr(hierarchy, "CLUSTER_MIN_ROOTS", 1)
+
+
+def test_cluster_tree_bounds_its_patches():
+    """Every node's sphere holds its patches' vertices; areas add up; children split the parent."""
+    from helpers import cube_room_scene
+    from radiosity.methods.hierarchical._clusters import ClusterTree
+
+    scene = cube_room_scene(20)
+    tree = ClusterTree(np.arange(scene.n_patches), scene.patch_quads, scene.patch_normal, scene.patch_area,
+                       scene.reflectance)
+    assert len(tree.internal) == scene.n_patches - 1 and sorted(tree.order) == list(range(scene.n_patches))
+    for k in range(len(tree)):
+        members = tree.order[tree.lo[k]:tree.hi[k]]
+        far = np.linalg.norm(scene.patch_quads[members] - tree.centre[k], axis=2).max()
+        assert far <= tree.radius[k] * (1 + 1e-12)
+        assert np.isclose(tree.area[k], scene.patch_area[members].sum())
+        cos = scene.patch_normal[members] @ tree.axis[k]
+        assert np.all(np.arccos(np.clip(cos, -1, 1)) <= tree.cone[k] + 1e-9)
+
+
+def test_clustered_furnace_sphere_links_grow_linearly(clustered):
+    """A closed sphere of n triangles, all emitting 1 and reflecting 0.5: B = 2 on every leaf
+    within the link tolerance, from O(n) links (4x the faces, well under 4x the links per
+    face... here: the links grow by less than 3.6x, where all pairs would grow 16x)."""
+    from helpers import sphere_scene
+
+    tol = 3e-2
+    runs = [solve_h(sphere_scene(m), link_tolerance=tol) for m in (4, 8)]
+    for solution in runs:
+        B = solution.radiosity
+        h = solution.summary()["hierarchy"]
+        assert h["cluster_links"] > 0 and h["converged"]
+        n = solution.scene.n_patches
+        assert h["initial_links"] < 0.5 * n * n  # not every facing pair
+        assert np.abs(B / 2.0 - 1.0).max() < 1.5 * tol
+    small, large = (s.summary()["hierarchy"]["links"] for s in runs)
+    assert large / small < 3.6

@@ -59,15 +59,20 @@ def _inactive(scene: Scene) -> np.ndarray:
     return scene.patch_obstruction | scene.patch_hidden
 
 
-def build_hierarchy(scene: Scene, options: Options) -> Hierarchy:
-    """The (unrefined) hierarchy of a scene under ``options`` (for tests and benches)."""
+def build_hierarchy(scene: Scene, options: Options, *, clusters: bool | None = None) -> Hierarchy:
+    """The (unrefined) hierarchy of a scene under ``options`` (for tests and benches).
+
+    ``clusters``: start from a volume hierarchy over the input patches (None: when there are
+    many of them, see :data:`._clusters.CLUSTER_MIN_ROOTS`).
+    """
     _check_tolerance(options.link_tolerance)
     size = min_element_size(scene, options)
     visibility = Visibility(scene.patch_quads, scene.patch_normal, scene.patch_object, scene.scale,
                             samples=options.visibility_samples, max_samples=options.visibility_max_samples)
     return Hierarchy(scene.patch_quads, scene.patch_normal, scene.reflectance, scene.emission, ~_inactive(scene),
                      visibility, min_size=size, tolerance=options.link_tolerance,
-                     formfactor_rtol=options.formfactor_rtol, exact=options.visibility != "rays")
+                     formfactor_rtol=options.formfactor_rtol, exact=options.visibility != "rays",
+                     clusters=clusters)
 
 
 @dataclass
@@ -159,7 +164,8 @@ def _leaf_scene(roots: Scene, hier: Hierarchy, leaves: np.ndarray) -> Scene:
 
 def _record(hier: Hierarchy, K: LinkOperator, leaves: np.ndarray) -> None:
     stats = hier.stats
-    stats.links = len(hier.links)
+    stats.links = len(hier.links) + len(hier.cluster_r)
+    stats.cluster_links = len(hier.cluster_r)
     stats.partly_visible_links = int(hier.links.partial.sum())
     stats.pairs_traced = hier.vis.n_traced
     stats.n_rays = hier.vis.n_rays
@@ -168,4 +174,4 @@ def _record(hier: Hierarchy, K: LinkOperator, leaves: np.ndarray) -> None:
     stats.max_level = int(hier.el.level.max())
     matrices = (K.push, K.gather, K.pull)
     stats.memory_bytes = int(sum(m.data.nbytes + m.indices.nbytes + m.indptr.nbytes for m in matrices)
-                             + hier.el.quads.nbytes * 3 + len(hier.links) * 50)
+                             + hier.el.quads.nbytes * 3 + stats.links * 50)
