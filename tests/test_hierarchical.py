@@ -250,3 +250,24 @@ def test_clustered_furnace_sphere_links_grow_linearly(clustered):
         assert np.abs(B / 2.0 - 1.0).max() < 1.5 * tol
     small, large = (s.summary()["hierarchy"]["links"] for s in runs)
     assert large / small < 3.6
+
+
+# ---------------------------------------------------------------------------------- method="auto"
+def test_auto_takes_the_hierarchy_past_the_pair_budget(furnace, monkeypatch):
+    """auto: uniform under AUTO_MAX_PAIRS (the default, and the summary says uniform), the
+    hierarchy above it (with a note why); --method uniform overrides the choice."""
+    import importlib
+
+    solve_module = importlib.import_module("radiosity.solve")  # radiosity.solve is the function
+    assert Options().method == "auto"
+    knobs = dict(preset="draft", cache=False, link_tolerance=5e-2, min_element_rel=1 / 10)
+    small = radiosity.solve(furnace, **knobs)
+    assert small.summary()["method"] == "uniform"
+    monkeypatch.setattr(solve_module, "AUTO_MAX_PAIRS", 10)
+    chosen = radiosity.solve(furnace, **knobs)
+    summary = chosen.summary()
+    assert summary["method"] == "hierarchical" and summary["hierarchy"]["links"] > 0
+    assert any(n.startswith("method auto: hierarchical") for n in summary["notes"])
+    forced = radiosity.solve(furnace, method="uniform", **knobs)
+    assert forced.summary()["method"] == "uniform"
+    np.testing.assert_allclose(chosen.object_radiosity()["room"], forced.object_radiosity()["room"], rtol=0.05)
