@@ -309,11 +309,13 @@ class Hierarchy:
         """
         tree = self.tree
         B = tree.values(self.B[:tree.n_roots])
-        cr, cs, pr, ps, n_split = tree.refine(r, s, B, self.eps)
-        if n_split or not len(self.cluster_factor):
-            self.cluster_r, self.cluster_s = cr, cs
-            self.cluster_factor = tree.estimates(cr, cs)
-        self.stats.cluster_links = len(cr)
+        over = (tree.bound(r, s, B) > self.eps) | (r == s)
+        factor = self.cluster_factor[~over] if len(self.cluster_factor) == len(r) else np.zeros(0)
+        cr, cs, pr, ps, n_split = tree.refine(r[over], s[over], B, self.eps)
+        # links that stay keep their estimate; only the new ones are estimated
+        self.cluster_r, self.cluster_s = np.concatenate([r[~over], cr]), np.concatenate([s[~over], cs])
+        self.cluster_factor = np.concatenate([factor, tree.estimates(cr, cs)])
+        self.stats.cluster_links = len(self.cluster_r)
         self._check_memory(len(pr))
         return pr, ps, n_split
 
