@@ -166,8 +166,7 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     cut = _cut(scene, options)
     cut_seconds = time.perf_counter() - t0
     if options.method == "auto":
-        method, note = _auto_method(cut.n_patches)  # the summary's "method" says which ran
-        options = replace(options, method=method)
+        method, note = _auto_method(cut.n_patches)  # options keep "auto"; the summary says which ran
         if method == "hierarchical":
             return _solve_hierarchical(replace(scene, notes=scene.notes + (note,)), options)
     try:
