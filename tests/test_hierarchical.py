@@ -280,3 +280,18 @@ def test_occluder_test_memory_is_refused_up_front(monkeypatch):
     monkeypatch.setenv("RADIOSITY_MEMORY_BUDGET", str(10**6))
     with pytest.raises(radiosity.MemoryBudgetError, match="occluder test of 500 patches against 500 hull facets"):
         solve_h(sphere_scene(5))
+
+
+def test_push_pull_conserves_power_through_clusters(furnace):
+    """With clusters, power gathered by elements and clusters (A H) equals the power pushed onto
+    the leaves; a cluster pulls the area mean of its leaves."""
+    hier = build_hierarchy(furnace, Options.from_preset("draft", link_tolerance=1e-2, min_element_rel=1 / 10),
+                           clusters=True)
+    hier.refine()
+    B, K, leaves, _ = hier.solve(1e-10)
+    assert len(hier.cluster_r) > 0
+    area = np.concatenate([hier.el.area, hier.tree.area[hier.tree.internal]])
+    gathered = area[:, None] * (K.gather @ (K.pull @ B))
+    pushed = hier.el.area[leaves, None] * (K @ B)
+    np.testing.assert_allclose(pushed.sum(axis=0), gathered.sum(axis=0), rtol=1e-12)
+    np.testing.assert_allclose(K.pull @ np.ones(len(leaves)), 1.0, rtol=1e-12)
