@@ -81,9 +81,11 @@ class Options:
         (:mod:`radiosity.methods.uniform.cluster`; needs ``radiosity[cluster]``). None: in this process.
     scheduler : str or None
         Fill it on the running Dask cluster at this address (``tcp://host:8786``) instead.
-    method : {"uniform", "hierarchical"}
+    method : {"auto", "uniform", "hierarchical"}
         ``"uniform"`` fills the view-factor matrix of the cut patches; ``"hierarchical"``
-        refines element quadtrees and links where they matter (``docs/hierarchical.md``).
+        refines element quadtrees and links where they matter (``docs/hierarchical.md``);
+        ``"auto"`` takes the hierarchy when the uniform fill would pair too many patches
+        (more than ``radiosity.solve.AUTO_MAX_PAIRS``: minutes and gigabytes), else uniform.
     link_tolerance : float
         Hierarchical only: a link is refined while a bound on the radiosity error it makes
         exceeds this fraction of the scene's mean emitted exitance (emitted power / area).
@@ -109,7 +111,7 @@ class Options:
     progress: bool = False
     workers: int | None = None
     scheduler: str | None = None
-    method: str = "uniform"
+    method: str = "auto"
     link_tolerance: float = 3e-3
     min_element_rel: float = 1 / 100
     min_element_size: float | None = None

@@ -166,7 +166,7 @@ class Solution:
             "emission": emission_reading(scene.emission_mode),
             "emitter_rays": scene.light_paths,
             "notes": list(scene.notes),
-            "method": getattr(self.options, "method", "uniform"),
+            "method": "hierarchical" if hasattr(fill, "summary") else "uniform",  # which ran (also under "auto")
             "hierarchy": fill.summary() if hasattr(fill, "summary") else None,
         }
 

@@ -375,3 +375,74 @@ def lambert_mp(x, n, poly, dps=40):
                 continue
             total += mp.atan2(s, vec_dot(a, b)) / s * vec_dot(cr, n)
         return abs(total) / (2 * mp.pi)
+
+
+def sphere_shell(subdivisions: int, radius: float = 1.0) -> np.ndarray:
+    """(20 m^2, 3, 3) triangles of a geodesic sphere (icosahedron faces cut m x m), wound inward.
+
+    A closed furnace: every face sees the others only, so with emission E and reflectance rho
+    everywhere B = E / (1 - rho) exactly (and F_ij = A_j / A_total).
+    """
+    t = (1 + 5 ** 0.5) / 2
+    ico = np.array([(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t), (0, -1, -t), (0, 1, -t),
+                    (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)], float)
+    faces = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4), (11, 10, 2),
+             (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5),
+             (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
+    m = int(subdivisions)
+    i, j = np.meshgrid(np.arange(m + 1), np.arange(m + 1), indexing="ij")
+    keep = i + j <= m
+    i, j = i[keep], j[keep]
+    index = -np.ones((m + 1, m + 1), int)
+    index[i, j] = np.arange(len(i))
+    up = [(index[a, b], index[a + 1, b], index[a, b + 1]) for a in range(m) for b in range(m - a)]
+    down = [(index[a + 1, b], index[a + 1, b + 1], index[a, b + 1]) for a in range(m) for b in range(m - a - 1)]
+    local = np.array(up + down)
+    tris = []
+    for f in faces:
+        p0, p1, p2 = ico[list(f)]
+        pts = p0 + np.outer(i / m, p1 - p0) + np.outer(j / m, p2 - p0)
+        pts = radius * pts / np.linalg.norm(pts, axis=1, keepdims=True)
+        tris.append(pts[local])
+    tris = np.concatenate(tris)
+    return tris[:, ::-1].copy()  # icosahedron faces wind outward: reverse to face the inside
+
+
+def sphere_scene(subdivisions: int, radius: float = 1.0, *, emission: float = 1.0, reflectance: float = 0.5):
+    """The furnace sphere as a Scene (no OBJ round trip), one object."""
+    import radiosity
+
+    tris = sphere_shell(subdivisions, radius)
+    quads = np.concatenate([tris, tris[:, 2:3]], axis=1)
+    n = len(quads)
+    return radiosity.Scene(objects=["sphere"], patch_quads=quads, patch_object=np.zeros(n, np.int64),
+                           patch_face=np.arange(n), reflectance=np.full((n, 3), reflectance),
+                           emission=np.full((n, 3), emission))
+
+
+def cube_room_scene(k: int, *, emission: float = 1.0, reflectance: float = 0.5, seed: int = 0):
+    """A closed unit room (normals in) holding ``k`` small floating cubes (normals out), on a
+    jittered grid so none touch: a furnace with heavy occlusion (B = E / (1 - rho))."""
+    import radiosity
+
+    def box(lo, hi, inward):
+        lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+        corner = lambda bits: np.where(np.array(bits, bool), hi, lo)  # noqa: E731
+        faces = [[(0, 0, 0), (0, 1, 0), (1, 1, 0), (1, 0, 0)], [(0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)],
+                 [(0, 0, 0), (1, 0, 0), (1, 0, 1), (0, 0, 1)], [(0, 1, 0), (0, 1, 1), (1, 1, 1), (1, 1, 0)],
+                 [(0, 0, 0), (0, 0, 1), (0, 1, 1), (0, 1, 0)], [(1, 0, 0), (1, 1, 0), (1, 1, 1), (1, 0, 1)]]
+        quads = np.array([[corner(b) for b in f] for f in faces])  # wound outward
+        return quads[:, ::-1].copy() if inward else quads
+
+    rng = np.random.default_rng(seed)
+    per_side = int(np.ceil(k ** (1 / 3)))
+    cell = 0.8 / per_side
+    idx = np.array(np.meshgrid(*[np.arange(per_side)] * 3, indexing="ij")).reshape(3, -1).T[:k]
+    lo = 0.1 + idx * cell + rng.uniform(0.1, 0.3, (k, 3)) * cell
+    size = rng.uniform(0.3, 0.5, (k, 1)) * cell
+    quads = np.concatenate([box([0, 0, 0], [1, 1, 1], True)] + [box(a, a + s, False) for a, s in zip(lo, size)])
+    n = len(quads)
+    obj = np.concatenate([[0] * 6, np.repeat(np.arange(1, k + 1), 6)])
+    return radiosity.Scene(objects=["room"] + [f"cube{i}" for i in range(k)], patch_quads=quads, patch_object=obj,
+                           patch_face=np.arange(n), reflectance=np.full((n, 3), reflectance),
+                           emission=np.full((n, 3), emission))

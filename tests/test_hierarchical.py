@@ -204,3 +204,94 @@ def test_unknown_method_is_refused():
     scene = radiosity.load_scene(radiosity.bundled_scene("unit_cube"))
     with pytest.raises(TypeError, match="unknown method 'radial'"):
         radiosity.solve(scene, method="radial", cache=False)
+
+
+# ---------------------------------------------------------------------------------- clustering
+@pytest.fixture
+def clustered(monkeypatch):
+    """Cluster even small scenes (the solve clusters from CLUSTER_MIN_ROOTS input patches on)."""
+    import radiosity.methods.hierarchical._hierarchy as hierarchy
+
+    monkeypatch.setattr(hierarchy, "CLUSTER_MIN_ROOTS", 1)
+
+
+def test_cluster_tree_bounds_its_patches():
+    """Every node's sphere holds its patches' vertices; areas add up; children split the parent."""
+    from helpers import cube_room_scene
+    from radiosity.methods.hierarchical._clusters import ClusterTree
+
+    scene = cube_room_scene(20)
+    tree = ClusterTree(np.arange(scene.n_patches), scene.patch_quads, scene.patch_normal, scene.patch_area,
+                       scene.reflectance)
+    assert len(tree.internal) == scene.n_patches - 1 and sorted(tree.order) == list(range(scene.n_patches))
+    for k in range(len(tree)):
+        members = tree.order[tree.lo[k]:tree.hi[k]]
+        far = np.linalg.norm(scene.patch_quads[members] - tree.centre[k], axis=2).max()
+        assert far <= tree.radius[k] * (1 + 1e-12)
+        assert np.isclose(tree.area[k], scene.patch_area[members].sum())
+        cos = scene.patch_normal[members] @ tree.axis[k]
+        assert np.all(np.arccos(np.clip(cos, -1, 1)) <= tree.cone[k] + 1e-9)
+
+
+def test_clustered_furnace_sphere_links_grow_linearly(clustered):
+    """A closed sphere of n triangles, all emitting 1 and reflecting 0.5: B = 2 on every leaf
+    within the link tolerance (measured: 0.9% at 3e-2), from O(n) links: 4x the faces, fewer
+    links per face (measured 3.6x the links, where all pairs would grow 16x)."""
+    from helpers import sphere_scene
+
+    tol = 3e-2
+    runs = [solve_h(sphere_scene(m), link_tolerance=tol) for m in (4, 8)]
+    for solution in runs:
+        B = solution.radiosity
+        h = solution.summary()["hierarchy"]
+        assert h["cluster_links"] > 0 and h["converged"]
+        n = solution.scene.n_patches
+        assert h["initial_links"] < 0.5 * n * n  # not every facing pair
+        assert np.abs(B / 2.0 - 1.0).max() < tol
+    small, large = (s.summary()["hierarchy"]["links"] / s.scene.n_patches for s in runs)
+    assert large < small
+
+
+# ---------------------------------------------------------------------------------- method="auto"
+def test_auto_takes_the_hierarchy_past_the_pair_budget(furnace, monkeypatch):
+    """auto: uniform under AUTO_MAX_PAIRS (the default, and the summary says uniform), the
+    hierarchy above it (with a note why); --method uniform overrides the choice."""
+    import importlib
+
+    solve_module = importlib.import_module("radiosity.solve")  # radiosity.solve is the function
+    assert Options().method == "auto"
+    knobs = dict(preset="draft", cache=False, link_tolerance=5e-2, min_element_rel=1 / 10)
+    small = radiosity.solve(furnace, **knobs)
+    assert small.summary()["method"] == "uniform"
+    monkeypatch.setattr(solve_module, "AUTO_MAX_PAIRS", 10)
+    chosen = radiosity.solve(furnace, **knobs)
+    summary = chosen.summary()
+    assert summary["method"] == "hierarchical" and summary["hierarchy"]["links"] > 0
+    assert any(n.startswith("method auto: hierarchical") for n in summary["notes"])
+    forced = radiosity.solve(furnace, method="uniform", **knobs)
+    assert forced.summary()["method"] == "uniform"
+    np.testing.assert_allclose(chosen.object_radiosity()["room"], forced.object_radiosity()["room"], rtol=0.05)
+
+
+def test_occluder_test_memory_is_refused_up_front(monkeypatch):
+    """A convex scene's hull has a facet per face: its occluder test is refused with the estimate."""
+    from helpers import sphere_scene
+
+    monkeypatch.setenv("RADIOSITY_MEMORY_BUDGET", str(10**6))
+    with pytest.raises(radiosity.MemoryBudgetError, match="occluder test of 500 patches against 500 hull facets"):
+        solve_h(sphere_scene(5))
+
+
+def test_push_pull_conserves_power_through_clusters(furnace):
+    """With clusters, power gathered by elements and clusters (A H) equals the power pushed onto
+    the leaves; a cluster pulls the area mean of its leaves."""
+    hier = build_hierarchy(furnace, Options.from_preset("draft", link_tolerance=1e-2, min_element_rel=1 / 10),
+                           clusters=True)
+    hier.refine()
+    B, K, leaves, _ = hier.solve(1e-10)
+    assert len(hier.cluster_r) > 0
+    area = np.concatenate([hier.el.area, hier.tree.area[hier.tree.internal]])
+    gathered = area[:, None] * (K.gather @ (K.pull @ B))
+    pushed = hier.el.area[leaves, None] * (K @ B)
+    np.testing.assert_allclose(pushed.sum(axis=0), gathered.sum(axis=0), rtol=1e-12)
+    np.testing.assert_allclose(K.pull @ np.ones(len(leaves)), 1.0, rtol=1e-12)

@@ -38,10 +38,11 @@ def add_args(parser) -> None:
                         help="linear solver for (I - rho F) B = E: auto takes a direct sparse LU up to "
                              f"{DIRECT_MAX:,} patches and bicgstab beyond; jacobi, gauss-seidel and "
                              "progressive (shooting) are there to compare (default: %(default)s)")
-    parser.add_argument("--method", choices=("uniform", "hierarchical"), default="uniform",
+    parser.add_argument("--method", choices=("auto", "uniform", "hierarchical"), default="auto",
                         help="uniform: fill the view-factor matrix of the cut patches; hierarchical: refine "
                              "element quadtrees and links only where the light needs them, for large or finely "
-                             "cut scenes (docs/hierarchical.md; default: %(default)s)")
+                             "cut scenes (docs/hierarchical.md); auto: hierarchical when the uniform fill would "
+                             "pair too many patches (minutes, gigabytes), else uniform (default: %(default)s)")
     parser.add_argument("--link-tolerance", type=positive_fraction, default=None, metavar="TOL",
                         help="hierarchical: refine a link while its radiosity error bound exceeds TOL times the "
                              "scene's mean emitted exitance (default: the preset's)")

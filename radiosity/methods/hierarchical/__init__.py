@@ -17,6 +17,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ... import _memory
 from ...options import Options
 from ...scene import Scene
 from ...visibility import Visibility
@@ -59,15 +60,39 @@ def _inactive(scene: Scene) -> np.ndarray:
     return scene.patch_obstruction | scene.patch_hidden
 
 
-def build_hierarchy(scene: Scene, options: Options) -> Hierarchy:
-    """The (unrefined) hierarchy of a scene under ``options`` (for tests and benches)."""
+def _check_occluder_memory(quads: np.ndarray) -> None:
+    """Refuse up front a scene whose occluder test would not fit the memory budget.
+
+    ``Visibility`` tests every patch against every facet of the scene's convex hull at once
+    (``visibility.occluder_mask``: (n, 4, facets) floats). A room's hull has a few facets, a
+    tessellated sphere's has n: 32,000 faces would need 30 GB.
+    """
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        facets = len(ConvexHull(quads.reshape(-1, 3)).equations)
+    except (QhullError, ValueError):
+        return  # flat scene: the occluder test allocates nothing per facet
+    need = len(quads) * 4 * facets * 8 * 2  # the distances and their comparison
+    _memory.check(f"the occluder test of {len(quads):,} patches against {facets:,} hull facets", need,
+                  "use fewer input faces (a convex scene's hull has one facet per face)")
+
+
+def build_hierarchy(scene: Scene, options: Options, *, clusters: bool | None = None) -> Hierarchy:
+    """The (unrefined) hierarchy of a scene under ``options`` (for tests and benches).
+
+    ``clusters``: start from a volume hierarchy over the input patches (None: when there are
+    many of them, see :data:`._clusters.CLUSTER_MIN_ROOTS`).
+    """
     _check_tolerance(options.link_tolerance)
     size = min_element_size(scene, options)
+    _check_occluder_memory(scene.patch_quads)
     visibility = Visibility(scene.patch_quads, scene.patch_normal, scene.patch_object, scene.scale,
                             samples=options.visibility_samples, max_samples=options.visibility_max_samples)
     return Hierarchy(scene.patch_quads, scene.patch_normal, scene.reflectance, scene.emission, ~_inactive(scene),
                      visibility, min_size=size, tolerance=options.link_tolerance,
-                     formfactor_rtol=options.formfactor_rtol, exact=options.visibility != "rays")
+                     formfactor_rtol=options.formfactor_rtol, exact=options.visibility != "rays",
+                     clusters=clusters)
 
 
 @dataclass
@@ -159,7 +184,8 @@ def _leaf_scene(roots: Scene, hier: Hierarchy, leaves: np.ndarray) -> Scene:
 
 def _record(hier: Hierarchy, K: LinkOperator, leaves: np.ndarray) -> None:
     stats = hier.stats
-    stats.links = len(hier.links)
+    stats.links = len(hier.links) + len(hier.cluster_r)
+    stats.cluster_links = len(hier.cluster_r)
     stats.partly_visible_links = int(hier.links.partial.sum())
     stats.pairs_traced = hier.vis.n_traced
     stats.n_rays = hier.vis.n_rays
@@ -168,4 +194,4 @@ def _record(hier: Hierarchy, K: LinkOperator, leaves: np.ndarray) -> None:
     stats.max_level = int(hier.el.level.max())
     matrices = (K.push, K.gather, K.pull)
     stats.memory_bytes = int(sum(m.data.nbytes + m.indices.nbytes + m.indptr.nbytes for m in matrices)
-                             + hier.el.quads.nbytes * 3 + len(hier.links) * 50)
+                             + hier.el.quads.nbytes * 3 + stats.links * 50)

@@ -36,6 +36,7 @@ import scipy.sparse.linalg as spla
 
 from ... import _memory
 from ...visibility import Visibility
+from ._clusters import CLUSTER_MIN_ROOTS, ClusterTree
 from ._elements import Elements
 from ._links import ElementVisibility, adaptive_factors, link_factors
 
@@ -46,6 +47,13 @@ __all__ = ["Hierarchy", "LinkOperator", "Links", "HierarchyStats"]
 LINK_BYTES = 8 + 8 + 8 + 8 + 8 + 2 + 12 + 40
 ELEMENT_BYTES = 96 + 24 + 24 + 6 * 8 + 24 + 8 * 24
 CHUNK_LINKS = 100_000  # links evaluated at once (bounds the temporaries of the estimates)
+# Cluster links scale their isotropic estimate by the visibility of one representative pair of
+# patches (the middle patch of each node in tree order); their bound needs none, but without it
+# occluded far transfer is counted whole on every link and adds up: the room with 300 cubes
+# came out +5.1% bright on average (+17% worst leaf). With it, the 100-cube room went from
+# +0.46% to -0.34% mean (+8.0% to +5.2% worst) at 3.6x the time; a sphere (nothing occludes)
+# pays nothing.
+CLUSTER_VISIBILITY = True
 # Share of an undecided link's factor left in doubt when all its rays agree (see _visibility_doubt).
 UNANIMOUS_DOUBT = 1.0
 
@@ -133,6 +141,8 @@ class HierarchyStats:
     max_level: int = 0
     roots: int = 0
     initial_links: int = 0
+    clusters: int = 0
+    cluster_links: int = 0
     min_element_size: float = 0.0
     eps: float = 0.0
     memory_bytes: int = 0
@@ -152,7 +162,8 @@ class HierarchyStats:
 
     def summary(self) -> dict:
         keys = ("rounds", "converged", "links", "partly_visible_links", "links_evaluated", "pairs_traced",
-                "exact_links", "elements", "leaves", "max_level", "roots", "initial_links", "min_element_size",
+                "exact_links", "elements", "leaves", "max_level", "roots", "initial_links", "clusters", "cluster_links",
+                "min_element_size",
                 "eps", "memory_bytes", "split_per_round")
         return {k: getattr(self, k) for k in keys}
 
@@ -178,10 +189,14 @@ class Hierarchy:
         Accuracy of the adaptive factors of links at the minimum size.
     exact : bool
         Exact shadows for partly visible links at the minimum size.
+    clusters : bool or None
+        Start from a volume hierarchy over the patches (:mod:`._clusters`) instead of all facing
+        pairs; None: when there are at least ``CLUSTER_MIN_ROOTS`` active patches.
     """
 
     def __init__(self, quads, normals, reflectance, emission, active, visibility: Visibility, *, min_size: float,
-                 tolerance: float, formfactor_rtol: float = 1e-4, exact: bool = True):
+                 tolerance: float, formfactor_rtol: float = 1e-4, exact: bool = True,
+                 clusters: bool | None = None):
         self.el = Elements(quads, normals, min_size)
         self.rho = np.asarray(reflectance, float)
         self.emission = np.asarray(emission, float)
@@ -198,6 +213,14 @@ class Hierarchy:
         self.stats = HierarchyStats(roots=len(quads), min_element_size=float(min_size), eps=float(self.eps))
         self._started = False
         self.progress = lambda n: None  # called with the number of links evaluated (a progress bar)
+        n_active = int(self.active.sum())
+        if clusters is None:
+            clusters = n_active >= CLUSTER_MIN_ROOTS
+        self.tree = None
+        self.cluster_r = self.cluster_s = self.cluster_factor = np.zeros(0, np.int64)
+        if clusters and n_active:
+            self.tree = ClusterTree(np.flatnonzero(self.active), self.el.quads, self.el.normal, self.el.area, self.rho)
+            self.stats.clusters = len(self.tree.internal)
 
     # ------------------------------------------------------------------ refinement
     def initial_pairs(self) -> tuple[np.ndarray, np.ndarray]:
@@ -285,12 +308,39 @@ class Hierarchy:
         _memory.check(f"a hierarchy of {links:,} links and {len(self.el):,} elements", int(estimate),
                       "raise link_tolerance or min_element_size (or use a coarser preset)")
 
+    def _refine_clusters(self, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+        """Refine the cluster links (r, s) with the current radiosities; keep those meeting eps.
+
+        Returns the pairs of input patches they came down to (to become element links) and
+        how many cluster links were split.
+        """
+        tree = self.tree
+        B = tree.values(self.B[:tree.n_roots])
+        over = (tree.bound(r, s, B) > self.eps) | (r == s)
+        factor = self.cluster_factor[~over] if len(self.cluster_factor) == len(r) else np.zeros(0)
+        cr, cs, pr, ps, n_split = tree.refine(r[over], s[over], B, self.eps)
+        # links that stay keep their estimate; only the new ones are estimated
+        self.cluster_r, self.cluster_s = np.concatenate([r[~over], cr]), np.concatenate([s[~over], cs])
+        estimate = tree.estimates(cr, cs)
+        if CLUSTER_VISIBILITY and len(cr):  # one representative pair of patches per new link
+            rep = tree.order[(tree.lo + tree.hi) // 2]
+            visible, _ = self.vis.fractions(self.el, rep[cr], rep[cs])
+            estimate = estimate * np.clip(visible, 0.0, 1.0)
+        self.cluster_factor = np.concatenate([factor, estimate])
+        self.stats.cluster_links = len(self.cluster_r)
+        self._check_memory(len(pr))
+        return pr, ps, n_split
+
     def refine(self) -> int:
         """One refinement pass with the current radiosities; returns how many links were split."""
+        n_cluster_split = 0
         if not self._started:
             self._started = True
-            r, s = self.initial_pairs()
-            self.stats.initial_links = len(r)
+            if self.tree is None:
+                r, s = self.initial_pairs()
+            else:
+                r, s, n_cluster_split = self._refine_clusters(np.zeros(1, np.int64), np.zeros(1, np.int64))
+            self.stats.initial_links = len(r) + len(self.cluster_r)
             work = self._evaluate(r, s)
             kept = []
         else:
@@ -300,7 +350,11 @@ class Hierarchy:
             kept = [self.links.take(~split)]
             work = self.links.take(split)
             work = self._evaluate(*self._expand(work)) if len(work) else work
+            if self.tree is not None:
+                r, s, n_cluster_split = self._refine_clusters(self.cluster_r, self.cluster_s)
+                work = Links.concat([work, self._evaluate(r, s)])
         n_split = 0 if not self.stats.split_per_round else len(self.links) - sum(len(k) for k in kept)
+        n_split += n_cluster_split
         while len(work):
             err = self.error(work)
             can = self.el.splittable
@@ -331,7 +385,27 @@ class Hierarchy:
         share = el.area[leaves][rows] / np.where(el.area[elements] > 0, el.area[elements], 1.0)
         pull = sp.csr_matrix((share, (elements, rows)), shape=(ne, nl))
         gather = sp.csr_matrix((self.links.factor * self.links.visible, (self.links.r, self.links.s)), shape=(ne, ne))
-        return LinkOperator(push, gather, pull, len(self.links)), leaves
+        if self.tree is None:
+            return LinkOperator(push, gather, pull, len(self.links)), leaves
+        push, gather, pull = self._with_clusters(push, gather, pull, leaves)
+        return LinkOperator(push, gather, pull, len(self.links) + len(self.cluster_r)), leaves
+
+    def _with_clusters(self, push, gather, pull, leaves):
+        """P, G, R extended by the cluster nodes (columns/rows after the elements).
+
+        A cluster pulls the area mean of its patches and pushes what it gathers to every leaf
+        below it (the isotropic approximation: its estimate is already per unit of its area).
+        """
+        tree, ne = self.tree, len(self.el)
+        share = tree.membership(tree.n_roots)  # (c, n_roots): roots are elements 0..n_roots-1
+        pull_c = share @ pull[:tree.n_roots]
+        inside = (share > 0).astype(float).tocsc()[:, self.el.root[leaves]]
+        push_c = inside.T.tocsr()
+        column = np.where(tree.patch >= 0, tree.patch, ne + tree.column)
+        n = ne + len(tree.internal)
+        links = sp.csr_matrix((self.cluster_factor, (column[self.cluster_r], column[self.cluster_s])), shape=(n, n))
+        gather = sp.block_diag([gather, sp.csr_matrix((len(tree.internal), len(tree.internal)))], format="csr") + links
+        return sp.hstack([push, push_c], format="csr"), gather, sp.vstack([pull, pull_c], format="csr")
 
     def solve(self, rtol: float) -> tuple[np.ndarray, LinkOperator, np.ndarray, SolveReport]:
         """Leaf radiosities (l, 3) of B = E + rho K B; element radiosities are pulled from them."""
@@ -345,7 +419,7 @@ class Hierarchy:
             report.iterations.append(iterations)
             report.residual.append(residual)
             report.fallback.append(fallback)
-        self.B = K.pull @ B
+        self.B = (K.pull @ B)[:len(self.el)]
         return B, K, leaves, report
 
 
