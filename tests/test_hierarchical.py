@@ -273,15 +273,6 @@ def test_auto_takes_the_hierarchy_past_the_pair_budget(furnace, monkeypatch):
     np.testing.assert_allclose(chosen.object_radiosity()["room"], forced.object_radiosity()["room"], rtol=0.05)
 
 
-def test_occluder_test_memory_is_refused_up_front(monkeypatch):
-    """A convex scene's hull has a facet per face: its occluder test is refused with the estimate."""
-    from helpers import sphere_scene
-
-    monkeypatch.setenv("RADIOSITY_MEMORY_BUDGET", str(10**6))
-    with pytest.raises(radiosity.MemoryBudgetError, match="occluder test of 500 patches against 500 hull facets"):
-        solve_h(sphere_scene(5))
-
-
 def test_push_pull_conserves_power_through_clusters(furnace):
     """With clusters, power gathered by elements and clusters (A H) equals the power pushed onto
     the leaves; a cluster pulls the area mean of its leaves."""

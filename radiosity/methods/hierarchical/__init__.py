@@ -17,7 +17,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ... import _memory
 from ...options import Options
 from ...scene import Scene
 from ...visibility import Visibility
@@ -60,24 +59,6 @@ def _inactive(scene: Scene) -> np.ndarray:
     return scene.patch_obstruction | scene.patch_hidden
 
 
-def _check_occluder_memory(quads: np.ndarray) -> None:
-    """Refuse up front a scene whose occluder test would not fit the memory budget.
-
-    ``Visibility`` tests every patch against every facet of the scene's convex hull at once
-    (``visibility.occluder_mask``: (n, 4, facets) floats). A room's hull has a few facets, a
-    tessellated sphere's has n: 32,000 faces would need 30 GB.
-    """
-    from scipy.spatial import ConvexHull, QhullError
-
-    try:
-        facets = len(ConvexHull(quads.reshape(-1, 3)).equations)
-    except (QhullError, ValueError):
-        return  # flat scene: the occluder test allocates nothing per facet
-    need = len(quads) * 4 * facets * 8 * 2  # the distances and their comparison
-    _memory.check(f"the occluder test of {len(quads):,} patches against {facets:,} hull facets", need,
-                  "use fewer input faces (a convex scene's hull has one facet per face)")
-
-
 def build_hierarchy(scene: Scene, options: Options, *, clusters: bool | None = None) -> Hierarchy:
     """The (unrefined) hierarchy of a scene under ``options`` (for tests and benches).
 
@@ -86,7 +67,6 @@ def build_hierarchy(scene: Scene, options: Options, *, clusters: bool | None = N
     """
     _check_tolerance(options.link_tolerance)
     size = min_element_size(scene, options)
-    _check_occluder_memory(scene.patch_quads)
     visibility = Visibility(scene.patch_quads, scene.patch_normal, scene.patch_object, scene.scale,
                             samples=options.visibility_samples, max_samples=options.visibility_max_samples)
     return Hierarchy(scene.patch_quads, scene.patch_normal, scene.reflectance, scene.emission, ~_inactive(scene),
