@@ -79,3 +79,20 @@ def test_culling_changes_no_fraction(seed):
     part = st0 == MAYBE
     np.testing.assert_allclose(culled.fraction(i, j, exact=True, order=3)[part],
                                plain.fraction(i, j, exact=True, order=3)[part], rtol=0, atol=1e-12)
+
+
+def test_a_convex_body_does_not_shade_its_own_faces():
+    """Inner prism wall to outer shell wall: the plane-and-bundle test leaves the inner prism's
+    neighbouring faces undecided; culling drops them all (the source is behind them) and the
+    pair is free."""
+    quads, normals, groups, scale = _scene([prism(0.5, 4.0, 12, inward=False),
+                                            prism(1.0, 4.8, 12, inward=True, z0=-0.4)])
+    inner, outer = np.flatnonzero(groups == 0), np.flatnonzero(groups == 1)
+    i, j = np.repeat(inner, len(outer)), np.tile(outer, len(inner))
+    plain = Visibility(quads, normals, groups, scale, closed=False)
+    culled = Visibility(quads, normals, groups, scale)
+    st0, _, _ = plain.classify(i, j)
+    st1, rows, occ = culled.classify(i, j)
+    assert (st0 == MAYBE).sum() > 0 and not (st1 == MAYBE).any()
+    ok = st0 == MAYBE
+    np.testing.assert_allclose(plain.fraction(i[ok], j[ok], exact=True, order=4), 1.0, atol=1e-12)

@@ -9,8 +9,9 @@ plane has y strictly in front. Hence, for a pair (i receives from j) whose two p
 and the same winding number with respect to S, every segment that S blocks is blocked by a face
 of S with part of the source j in front of its plane: the faces of S whose plane has all of j
 behind it (or in it) can be dropped from the pair's occluders without changing any visible set.
-(Which end plays y only has to be the same for all of S's faces in one pair; the fill shares a
-pair's list with its mirror, which is fine for that reason.) Where the windings differ (a patch
+(Which end plays y only has to be the same for all of S's faces in one pair, so each pair takes,
+per object, the end that drops more faces; the fill shares a pair's list with its mirror, which
+is fine for that reason.) Where the windings differ (a patch
 inside a closed box, the other outside) every segment crosses S an odd number of times and
 nothing is dropped.
 
@@ -179,9 +180,18 @@ def closed_cull(quads: np.ndarray, i: np.ndarray, j: np.ndarray, rows: np.ndarra
         return keep
     c, pi, pj = col[cand], i[rows[cand]], j[rows[cand]]
     li, lj = labels[pi, c], labels[pj, c]
-    cand, pj = cand[(li == lj) & (li != NO_LABEL)], pj[(li == lj) & (li != NO_LABEL)]
+    same = (li == lj) & (li != NO_LABEL)
+    cand, c, pi, pj = cand[same], c[same], pi[same], pj[same]
     k = occ[cand]
-    height = np.einsum("tvc,tc->tv", quads[pj] - occluders.center[k][:, None, :], occluders.normal[k])
-    behind = (front[cand][:, None] * height).max(axis=1) <= tol  # all of the source behind or in the plane
-    keep[cand[behind]] = False
+
+    def behind(p):  # all of patch p behind the face's plane, or in it
+        height = np.einsum("tvc,tc->tv", quads[p] - occluders.center[k][:, None, :], occluders.normal[k])
+        return (front[cand][:, None] * height).max(axis=1) <= tol
+
+    # either end may play the source, as long as it is the same one for all of S's faces in the
+    # pair: take the one that drops more of them
+    by_j, by_i = behind(pj), behind(pi)
+    _, group = np.unique(rows[cand] * labels.shape[1] + c, return_inverse=True)
+    use_i = np.bincount(group, by_i) > np.bincount(group, by_j)
+    keep[cand[np.where(use_i[group], by_i, by_j)]] = False
     return keep
