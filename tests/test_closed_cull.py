@@ -79,6 +79,7 @@ def test_culling_changes_no_fraction(seed):
     part = st0 == MAYBE
     np.testing.assert_allclose(culled.fraction(i, j, exact=True, order=3)[part],
                                plain.fraction(i, j, exact=True, order=3)[part], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(culled.fraction(i, j), plain.fraction(i, j))  # the same rays, blocked alike
 
 
 def test_a_convex_body_does_not_shade_its_own_faces():
