@@ -67,3 +67,10 @@ SHADOW_CELLS_BELOW = 1e-4
 # floating boxes (16 occluders a pair, median) they spent 1,860 points a pair and the 216-patch
 # fill took 366 s against seconds with fixed points.
 MAX_CELL_OCCLUDERS = 4
+
+# Closed-object culling (``_closed``): winding numbers are taken this far (relative to the scene
+# size) in front of each patch, count as integers within WINDING_TOL, and an object is left
+# uncut when telling them would take more than WINDING_BUDGET (point, triangle) evaluations.
+WINDING_OFFSET_REL = 1e-7
+WINDING_TOL = 1e-6
+WINDING_BUDGET = 50_000_000

@@ -46,6 +46,10 @@ class Occluders:
     node_start: np.ndarray
     node_count: np.ndarray
     order: np.ndarray
+    # the object of each occluder, and +1 / -1 where its patches' front side is along / against
+    # ``normal`` (0: a merged polygon whose patches face both ways); for closed-object culling
+    group: np.ndarray | None = None
+    front: np.ndarray | None = None
 
     @property
     def n_occluders(self) -> int:
@@ -97,6 +101,7 @@ def build_occluders(quads: np.ndarray, normals: np.ndarray, groups: np.ndarray, 
     """Merge the masked patches into convex occluder polygons and build their hierarchy."""
     idx = np.flatnonzero(mask & normals.any(axis=1))
     polys: list[np.ndarray] = []
+    members_of: list[np.ndarray] = []  # the patches of each polygon
     if len(idx):
         n = normals[idx]
         # one sign per plane, so both faces of a thin wall fall in the same group
@@ -114,12 +119,15 @@ def build_occluders(quads: np.ndarray, normals: np.ndarray, groups: np.ndarray, 
                 merged = _merge_group(quads[idx[members]], n[members[0]], float(area[members].sum()))
             if merged is not None:
                 polys.append(merged)
+                members_of.append(idx[members])
             else:
                 polys.extend(_dedupe(quads[p]) for p in idx[members])
+                members_of.extend(idx[members, None])
     if not polys:
         z = np.zeros((0, 3))
         zi = np.zeros(0, np.int64)
-        return Occluders(np.zeros((0, 3, 3)), z, z, np.zeros((0, 3, 3)), z, z, z, z, zi, zi, zi, zi, zi)
+        return Occluders(np.zeros((0, 3, 3)), z, z, np.zeros((0, 3, 3)), z, z, z, z, zi, zi, zi, zi, zi, zi,
+                         np.zeros(0, np.int8))
     P = _pad(polys)
     normal = vector_areas(P)  # half the old unscaled sum: the same bits once normalised
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
@@ -132,7 +140,16 @@ def build_occluders(quads: np.ndarray, normals: np.ndarray, groups: np.ndarray, 
     sign = np.sign(np.einsum("kmc,kmc->km", center[:, None, :] - P, inward))
     inward *= np.where(sign < 0, -1.0, 1.0)[..., None]
     lo, hi = P.min(axis=1), P.max(axis=1)
-    return Occluders(P, normal, center, inward, lo, hi, *_build_bvh(lo, hi))
+    group = np.array([groups[m[0]] for m in members_of], np.int64)
+    front = np.array([_front_sign(normals[m] @ nk) for m, nk in zip(members_of, normal)], np.int8)
+    return Occluders(P, normal, center, inward, lo, hi, *_build_bvh(lo, hi), group, front)
+
+
+def _front_sign(cosines: np.ndarray) -> int:
+    """+1 / -1 if every patch of a polygon faces along / against its normal, else 0."""
+    if (cosines > 0).all():
+        return 1
+    return -1 if (cosines < 0).all() else 0
 
 
 def _build_bvh(lo: np.ndarray, hi: np.ndarray):

@@ -171,11 +171,19 @@ class Visibility:
     cull : bool, default: True
         Classify pairs before tracing. ``False`` treats every patch as an occluder and every
         pair as partly occluded (for robustness tests of the ray path).
+    closed : bool, default: True
+        Drop, for each partly occluded pair, the faces of closed objects that cannot be the
+        first to block it (``_closed``: those with the whole source behind their plane, when
+        both patches have the same winding number with respect to the object).
     """
 
     def __init__(self, quads: np.ndarray, normals: np.ndarray, groups: np.ndarray, scale: float, *,
-                 samples: int = 2, max_samples: int = 4, cull: bool = True):
+                 samples: int = 2, max_samples: int = 4, cull: bool = True, closed: bool = True):
         self.quads = quads
+        self.groups = np.asarray(groups)
+        self.closed = closed and cull
+        self._windings = None  # (column, labels) of winding_labels, on first use
+        self._windings_for = quads
         self.normals = normals
         self.scale = scale
         self.samples = samples
@@ -190,6 +198,7 @@ class Visibility:
         self._tracer = None
         self.n_rays = 0
         self.n_exact_rows = 0
+        self.n_closed_culled = 0  # (pair, occluder) rows left out by closed-object culling
         # receiver points whose shadow union GEOS could not compute directly (see _exact._unite)
         self.union_fallbacks: dict[str, int] = {}
 
@@ -221,7 +230,27 @@ class Visibility:
         if not self.cull:
             return self._classify(self.quads[i], self.quads[j], np.minimum(self._lo[i], self._lo[j]),
                                   np.maximum(self._hi[i], self._hi[j]))
-        return self._classify_pairs(self.quads, np.asarray(i), self.quads, np.asarray(j))
+        i, j = np.asarray(i), np.asarray(j)
+        status, rows, occ = self._classify_pairs(self.quads, i, self.quads, j)
+        if self.closed and len(rows) and self.quads is self._windings_for:  # not for the hierarchy's elements
+            status, rows, occ = self._cull_closed(i, j, status, rows, occ)
+        return status, rows, occ
+
+    def _cull_closed(self, i, j, status, rows, occ):
+        """Leave out the closed objects' faces that a partly occluded pair can do without."""
+        from ._closed import closed_cull, winding_labels
+
+        if self._windings is None:
+            self._windings = winding_labels(self.quads, self.normals, self.groups, self.scale)
+        column, labels = self._windings
+        keep = closed_cull(self.quads, i, j, rows, occ, self.occluders, column, labels, PLANE_REL * self.scale)
+        if keep.all():
+            return status, rows, occ
+        self.n_closed_culled += int((~keep).sum())
+        left = np.bincount(rows[keep], minlength=len(status))
+        status = status.copy()
+        status[(status == MAYBE) & (left == 0)] = FREE  # every maybe occluder was one the pair can do without
+        return status, rows[keep], occ[keep]
 
     def _classify_pairs(self, va, ia, vb, ib):
         """Compiled classification of pairs (va[ia], vb[ib]): BVH walk and exact test fused."""
