@@ -446,3 +446,23 @@ def cube_room_scene(k: int, *, emission: float = 1.0, reflectance: float = 0.5, 
     return radiosity.Scene(objects=["room"] + [f"cube{i}" for i in range(k)], patch_quads=quads, patch_object=obj,
                            patch_face=np.arange(n), reflectance=np.full((n, 3), reflectance),
                            emission=np.full((n, 3), emission))
+
+
+def axis_box(lo, hi, *, inward: bool) -> list[np.ndarray]:
+    """The six faces of an axis-aligned box, wound so normals point in (a room) or out (a block)."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    centre = 0.5 * (lo + hi)
+    faces = []
+    for axis in range(3):
+        u, v = [a for a in range(3) if a != axis]
+        for corner in (lo, hi):
+            quad = np.zeros((4, 3))
+            quad[:, axis] = corner[axis]
+            for k, (a, b) in enumerate([(0, 0), (1, 0), (1, 1), (0, 1)]):
+                quad[k, u] = (lo, hi)[a][u]
+                quad[k, v] = (lo, hi)[b][v]
+            normal = np.cross(quad[1] - quad[0], quad[2] - quad[0])
+            if (normal @ (quad[0] - centre) > 0) == inward:
+                quad = quad[::-1].copy()
+            faces.append(quad)
+    return faces

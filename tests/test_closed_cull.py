@@ -9,8 +9,8 @@ import pytest
 from radiosity.geometry import polygon_normals
 from radiosity.visibility import FULL, MAYBE, Visibility
 from radiosity.visibility._closed import NO_LABEL, winding_labels
-from test_exchange import prism
-from test_hierarchical import box
+
+from helpers import axis_box, prism
 
 
 def _scene(objects):
@@ -23,7 +23,7 @@ def _scene(objects):
 def test_windings_of_closed_and_open_objects():
     quads, normals, groups, scale = _scene([prism(0.5, 4.0, 12, inward=False),
                                             prism(1.0, 4.8, 12, inward=True, z0=-0.4),
-                                            box((2, 2, 0), (3, 3, 1), inward=False)[:5]])  # open: no lid
+                                            axis_box((2, 2, 0), (3, 3, 1), inward=False)[:5]])  # open: no lid
     column, labels = winding_labels(quads, normals, groups, scale)
     assert column.tolist() == [0, 1, -1]
     assert (labels[:, 0] == 0).all()  # everything in front of the inner prism is outside it
@@ -35,8 +35,8 @@ def test_a_patch_inside_a_closed_box_keeps_its_occluders():
     """Windings differ across the box's surface: nothing is dropped, the pair stays blocked."""
     inner = np.array([[0.4, 0.4, 0.5], [0.6, 0.4, 0.5], [0.6, 0.6, 0.5], [0.4, 0.6, 0.5]])  # facing up, inside
     lid = np.array([[0, 0, 3.0], [1, 0, 3.0], [1, 1, 3.0], [0, 1, 3.0]])[::-1]  # facing down, above
-    quads, normals, groups, scale = _scene([box((0, 0, 0), (1, 1, 1), inward=False), [inner], [lid],
-                                            box((-5, -5, -5), (6, 6, 6), inward=True)])
+    quads, normals, groups, scale = _scene([axis_box((0, 0, 0), (1, 1, 1), inward=False), [inner], [lid],
+                                            axis_box((-5, -5, -5), (6, 6, 6), inward=True)])
     _, labels = winding_labels(quads, normals, groups, scale)
     a, b = 6, 7
     assert labels[a, 0] == 1 and labels[b, 0] == 0 and NO_LABEL not in labels[[a, b]]
@@ -53,8 +53,8 @@ def _random_pairs(rng, n_boxes):
                [np.array([[0, 0, 2], [2, 0, 2], [2, 2, 2], [0, 2, 2]], float)[::-1]]]
     for _ in range(n_boxes):
         lo = rng.uniform([-0.5, -0.5, 0.2], [2.0, 2.0, 1.5])
-        objects.append(box(lo, lo + rng.uniform(0.1, 0.8, 3), inward=False))
-    objects.append(box((-3, -3, -3), (5, 5, 5), inward=True))  # a closed room around it all
+        objects.append(axis_box(lo, lo + rng.uniform(0.1, 0.8, 3), inward=False))
+    objects.append(axis_box((-3, -3, -3), (5, 5, 5), inward=True))  # a closed room around it all
     return _scene(objects)
 
 

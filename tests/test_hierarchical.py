@@ -16,38 +16,18 @@ from radiosity.methods.hierarchical._elements import Elements, split_quads
 from radiosity.options import Options
 from radiosity.geometry import centroids_and_areas
 
-from helpers import write_obj
+from helpers import axis_box, write_obj
 
 REFERENCE = Path(__file__).parent / "data" / "cornell_uniform_default.json"
-
-
-def box(lo, hi, *, inward: bool) -> list[np.ndarray]:
-    """The six faces of an axis-aligned box, wound so normals point in (a room) or out (a block)."""
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    centre = 0.5 * (lo + hi)
-    faces = []
-    for axis in range(3):
-        u, v = [a for a in range(3) if a != axis]
-        for corner in (lo, hi):
-            quad = np.zeros((4, 3))
-            quad[:, axis] = corner[axis]
-            for k, (a, b) in enumerate([(0, 0), (1, 0), (1, 1), (0, 1)]):
-                quad[k, u] = (lo, hi)[a][u]
-                quad[k, v] = (lo, hi)[b][v]
-            normal = np.cross(quad[1] - quad[0], quad[2] - quad[0])
-            if (normal @ (quad[0] - centre) > 0) == inward:
-                quad = quad[::-1].copy()
-            faces.append(quad)
-    return faces
 
 
 @pytest.fixture(scope="module")
 def furnace(tmp_path_factory):
     """A closed room with a floating block and a floating slab: every face emits 1, reflects 0.5."""
     path = write_obj(tmp_path_factory.mktemp("furnace") / "furnace.obj",
-                     {"room": box([0, 0, 0], [1, 1, 1], inward=True),
-                      "block": box([0.3, 0.35, 0.3], [0.65, 0.7, 0.6], inward=False),
-                      "slab": box([0.1, 0.1, 0.1], [0.9, 0.2, 0.3], inward=False)})
+                     {"room": axis_box([0, 0, 0], [1, 1, 1], inward=True),
+                      "block": axis_box([0.3, 0.35, 0.3], [0.65, 0.7, 0.6], inward=False),
+                      "slab": axis_box([0.1, 0.1, 0.1], [0.9, 0.2, 0.3], inward=False)})
     with pytest.warns(radiosity.RadiosityWarning):  # its MTL emits nothing: the materials come next
         scene = radiosity.load_scene(path)
     return scene.with_materials(reflectance=0.5, emission=1.0)
