@@ -151,6 +151,12 @@ def guard_imports():
     command = started_as_command()
     if command:
         signal.signal(signal.SIGTERM, _raise_terminated)
+        # numba's OpenMP workers spin between parallel loops by default, taking the CPU the
+        # serial passes between them need: passive waiting made the plates' fill 1.4-1.9x
+        # faster on a shared 2-core machine (docs/formfactors.md). The command owns its
+        # process, so it sets this (a library import leaves the host's OpenMP alone); an
+        # OMP_WAIT_POLICY the user set wins.
+        os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     try:
         if command:  # inside the try: it imports numba, seconds in which a Ctrl-C may come
             hold_signals_while_compiling()

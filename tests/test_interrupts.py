@@ -125,3 +125,18 @@ def test_a_signal_during_a_compile_arrives_outside_it():
     assert result.returncode == 0, result.stderr
     assert result.stdout.split()[:1] == ["handled-outside-lock"], result.stdout
     assert "Exception ignored" not in result.stderr and "Traceback" not in result.stderr, result.stderr
+
+
+def test_the_command_waits_passively_unless_told_otherwise():
+    """numba's OpenMP workers spin by default; the command asks them to wait passively."""
+    code = ("import os, radiosity._startup as s\n"
+            "s.started_as_command = lambda: True\n"
+            "with s.guard_imports():\n"
+            "    pass\n"
+            "print(os.environ.get('OMP_WAIT_POLICY'))\n")
+    env = {k: v for k, v in __import__("os").environ.items() if k != "OMP_WAIT_POLICY"}
+    got = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=60)
+    assert got.stdout.split() == ["PASSIVE"], got.stderr
+    env["OMP_WAIT_POLICY"] = "ACTIVE"
+    got = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=60)
+    assert got.stdout.split() == ["ACTIVE"], got.stderr
