@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import _tol
-from ..geometry import vector_areas
+from ..geometry import clip_slots, vector_areas
 
 __all__ = ["receiver_frame", "image_plane", "image_plane_clipped", "clip_error_bound",
            "radius_for_error", "vertex_lambert", "homogeneous"]
@@ -113,17 +113,10 @@ def _clip(verts: np.ndarray, dist: np.ndarray, *, flatten: int | None = None) ->
         Clipped polygons, padded by repeating the previous kept vertex (zero-length edges).
         Rows clipped away entirely repeat one vertex (callers treat them as empty).
     """
-    rows, k, _ = verts.shape
-    nxt = np.roll(verts, -1, axis=1)
-    d_next = np.roll(dist, -1, axis=1)
-    keep = dist >= 0.0
-    crosses = ((dist > 0.0) & (d_next < 0.0)) | ((dist < 0.0) & (d_next > 0.0))
-    t = np.where(crosses, dist / np.where(crosses, dist - d_next, 1.0), 0.0)
-    cut = verts + t[..., None] * (nxt - verts)
+    rows = verts.shape[0]
+    slots, valid = clip_slots(verts, dist)
     if flatten is not None:
-        cut[..., flatten] = 0.0
-    slots = np.stack([verts, cut], axis=2).reshape(rows, 2 * k, 3)
-    valid = np.stack([keep, crosses], axis=2).reshape(rows, 2 * k)
+        slots[:, 1::2, flatten] = 0.0  # the odd slots are the cut points
     # Compact: valid slots first (stable), then pad with the last valid slot of the row.
     count = valid.sum(axis=1)
     width = max(int(count.max(initial=0)), 1)
