@@ -8,9 +8,11 @@ about two thirds of the fill. :func:`separated_factors` does the same arithmetic
 order-p Gauss points of :func:`radiosity.formfactors._quadrature.split_patch_points`, or its centroid for
 p = 1, and Lambert's closed form in the one-source lane loops) in one parallel loop over runs of
 pairs sharing a source: each run copies its receivers' points (computed once per block, in a
-table) straight into the lanes. Pairs whose source is small enough for an order <= 3 Gauss rule
-under the same a-priori bound take the two-area rule instead of Lambert's closed form: Gauss
-points on both patches and the point-to-point kernel (:func:`two_area_need`).
+table) straight into the lanes, or, for a run of two-area pairs whose receivers' points lie side
+by side in the table (the fill's receivers j > i come in index order), reads them in place.
+Pairs whose source is small enough for an order <= 3 Gauss rule under the same a-priori bound
+take the two-area rule instead of Lambert's closed form: Gauss points on both patches and the
+point-to-point kernel (:func:`two_area_need`).
 
 :func:`reciprocal_pairs` orients each unordered pair so that the smaller patch receives (its
 integral is the cheaper and the better conditioned: rho in the a-priori bound grows as the
