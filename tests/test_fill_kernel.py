@@ -213,3 +213,20 @@ def test_two_area_rule_meets_rtol(rtol):
     used = two != lambert
     assert used.sum() > 0.5 * len(i)
     assert np.max(np.abs(two - exact) / exact) <= rtol
+
+
+def test_two_area_lanes_read_in_place_or_copied_alike():
+    """Runs whose receivers' points lie side by side in the point table read them in place;
+    shuffled receivers (points not side by side) are copied into lanes: the same numbers."""
+    quads = plates(8)
+    normals, centroid, area = geometry(quads)
+    src = np.repeat(np.arange(64), 64)
+    rec = np.tile(np.arange(64, 128), 64)  # each source's receivers in index order: in place
+    order = np.full(len(rec), 2)
+    in_place = separated_factors(quads, normals, centroid, area, rec, src, order, _MODES["fill"], two_area_rtol=1e-5)
+    shuffle = np.concatenate([s * 64 + np.random.default_rng(s).permutation(64) for s in range(64)])
+    copied = separated_factors(quads, normals, centroid, area, rec[shuffle], src[shuffle], order[shuffle],
+                               _MODES["fill"], two_area_rtol=1e-5)
+    lambert = separated_factors(quads, normals, centroid, area, rec, src, order, _MODES["fill"])
+    assert np.all(in_place != lambert)  # every pair took the two-area rule
+    assert np.array_equal(in_place[shuffle], copied)

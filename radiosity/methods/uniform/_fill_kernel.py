@@ -8,9 +8,11 @@ about two thirds of the fill. :func:`separated_factors` does the same arithmetic
 order-p Gauss points of :func:`radiosity.formfactors._quadrature.split_patch_points`, or its centroid for
 p = 1, and Lambert's closed form in the one-source lane loops) in one parallel loop over runs of
 pairs sharing a source: each run copies its receivers' points (computed once per block, in a
-table) straight into the lanes. Pairs whose source is small enough for an order <= 3 Gauss rule
-under the same a-priori bound take the two-area rule instead of Lambert's closed form: Gauss
-points on both patches and the point-to-point kernel (:func:`two_area_need`).
+table) straight into the lanes, or, for a run of two-area pairs whose receivers' points lie side
+by side in the table (the fill's receivers j > i come in index order), reads them in place.
+Pairs whose source is small enough for an order <= 3 Gauss rule under the same a-priori bound
+take the two-area rule instead of Lambert's closed form: Gauss points on both patches and the
+point-to-point kernel (:func:`two_area_need`).
 
 :func:`reciprocal_pairs` orients each unordered pair so that the smaller patch receives (its
 integral is the cheaper and the better conditioned: rho in the a-priori bound grows as the
@@ -526,6 +528,42 @@ def _two_area_lanes(X, Y, Z, NX, NY, NZ, SP, SW, nq, nb0, nb1, nb2, vals):
             vals[u] += wk * c_rec * c_src / (r2 * r2)
 
 
+def _side_by_side(slot, rec, order, t0, t1):
+    """Whether pairs t0..t1's receiver points lie in the point table in pair order, one run of
+    columns: the fill's receivers j > i come in index order, so for most runs they do."""
+    at = slot[rec[t0], order[t0]]
+    for t in range(t0, t1):
+        if slot[rec[t], order[t]] != at:
+            return False
+        at += order[t] * order[t]
+    return True
+
+
+def _two_area_in_table(quads, normals, centroid, area, rec, src, order, t0, t1, q_run, nodes, weights, at0,
+                       TP, TN, TW, out):
+    """out[t0:t1] for a run of two-area pairs whose receiver points lie side by side in the table
+    from column at0 (:func:`_side_by_side`): the lanes are the table's own columns, not copies.
+    The same arithmetic in the same order as the copying path, so the same numbers bit for bit."""
+    b = src[t0]
+    n = 0
+    for t in range(t0, t1):
+        n += order[t] * order[t]
+    vals = np.empty(n)
+    SP, SN, SW = np.empty((3, q_run * q_run)), np.empty((3, q_run * q_run)), np.empty(q_run * q_run)
+    _put_points(quads, normals, centroid, area, b, q_run, nodes, weights, SP, SN, SW, 0)
+    _two_area_lanes(TP[0, at0:at0 + n], TP[1, at0:at0 + n], TP[2, at0:at0 + n], TN[0, at0:at0 + n],
+                    TN[1, at0:at0 + n], TN[2, at0:at0 + n], SP, SW, q_run * q_run, normals[b, 0], normals[b, 1],
+                    normals[b, 2], vals)
+    pos = 0
+    for t in range(t0, t1):
+        acc, wsum = 0.0, 0.0
+        for l in range(pos, pos + order[t] * order[t]):
+            acc += TW[at0 + l] * vals[l]
+            wsum += TW[at0 + l]
+        pos += order[t] * order[t]
+        out[t] = acc / wsum if wsum > 0.0 else 0.0
+
+
 def _separated_kernel(quads, normals, centroid, area, radius, rec, src, order, starts, nodes, weights, mode,
                       raw_below, need_src, slot, TP, TN, TW, out):
     """out[t] = F(rec[t] -> src[t]) for pairs sorted by source, one task per run in ``starts``.
@@ -554,6 +592,10 @@ def _separated_kernel(quads, normals, centroid, area, radius, rec, src, order, s
             widest = max(widest, (np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) + radius[a]) / max(radius[b], _TINY))
         run_mode = 1 if widest <= raw_below else mode
         n = n_lam + n_two
+        if n_lam == 0 and _side_by_side(slot, rec, order, t0, t1):
+            _two_area_in_table(quads, normals, centroid, area, rec, src, order, t0, t1, q_run, nodes, weights,
+                               slot[rec[t0], order[t0]], TP, TN, TW, out)
+            continue
         PT, NT = np.empty((3, n)), np.empty((3, n))
         W, vals = np.empty(n), np.empty(n)
         pos_lam, pos_two = 0, n_lam
@@ -629,4 +671,6 @@ _table_slots = _numba.njit(cache=True)(_table_slots)
 _point_table = _TwoWays(_point_table, lambda *a: a[6].shape[0] * 8, error_model="numpy")
 _two_area_order = _numba.njit(cache=True, inline="always", error_model="numpy")(_two_area_order)
 _two_area_lanes = _numba.njit(cache=True, error_model="numpy")(_two_area_lanes)
+_side_by_side = _numba.njit(cache=True)(_side_by_side)
+_two_area_in_table = _numba.njit(cache=True, error_model="numpy")(_two_area_in_table)
 _separated_kernel = _TwoWays(_separated_kernel, lambda *a: len(a[5]), error_model="numpy")
