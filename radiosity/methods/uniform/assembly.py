@@ -154,7 +154,8 @@ def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettin
     classified once for both.
     """
     from ...visibility import FULL, MAYBE
-    from ...visibility._constants import MAX_CELL_OCCLUDERS, SHADOW_CELLS_BELOW, SHADOW_RTOL_SHARE
+    from ...visibility._constants import (MAX_CELL_OCCLUDERS, SHADOW_CELLS_BELOW, SHADOW_ORDER_EXTRA,
+                                          SHADOW_RTOL_SHARE)
 
     if visibility.cull and visibility.n_occluders == 0:  # nothing can block: every pair is free
         return
@@ -219,7 +220,7 @@ def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettin
             where[sel] = np.arange(len(sel))
             keep = where[local[rows]] >= 0
             frac[sel] = visibility.exact_fraction(pi[sel], pj[sel], where[local[rows[keep]]], occ[keep],
-                                                  settings.near_order)
+                                                  settings.near_order + SHADOW_ORDER_EXTRA)
     f[nz[part]] *= frac
 
 
