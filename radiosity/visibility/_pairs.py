@@ -26,9 +26,10 @@ versions (``Visibility._classify``, ``Visibility._trace_numpy``, ``_occluders.cl
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import ConvexHull, QhullError
+from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from .. import _tol
+from ..geometry import polygon_normals
 from ..formfactors import patch_points
 from . import _occluders
 from ._constants import (CHUNK_CELL_PAIRS, CHUNK_CLASSIFY, CHUNK_SHADOWS, MAX_UNION, MAX_UNION_CELLS,
@@ -60,11 +61,7 @@ def occluder_mask(quads: np.ndarray, scale: float) -> np.ndarray:
 
 def _nearest_planes(quads: np.ndarray, planes: np.ndarray, scale: float, k: int = 8) -> np.ndarray:
     """(n, 2k) indices of the hull facets whose planes are nearest each patch's plane, either sign."""
-    from scipy.spatial import cKDTree
-
-    normal = np.cross(quads[:, 2] - quads[:, 0], quads[:, 3] - quads[:, 1])
-    length = np.linalg.norm(normal, axis=1, keepdims=True)
-    normal = np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
+    normal = polygon_normals(quads)  # zero for a degenerate patch: it matches no facet, stays an occluder
     offset = -np.einsum("nc,nc->n", normal, quads.mean(axis=1)) / scale
     keys = np.column_stack([normal, offset])
     tree = cKDTree(np.column_stack([planes[:, :3], planes[:, 3] / scale]))
