@@ -139,7 +139,7 @@ class Options:
 
 PRESETS = {
     "draft": Options(patch_size_rel=1 / 12, near_order=2, far_separation=2.0, visibility_samples=2,
-                     visibility="rays", visibility_max_samples=3, visibility_atol=1e-3, formfactor_rtol=1e-3,
+                     visibility="auto", visibility_max_samples=3, visibility_atol=1e-3, formfactor_rtol=1e-3,
                      link_tolerance=1e-2, min_element_rel=1 / 50),
     "default": Options(),
     "fine": Options(patch_size_rel=1 / 35, near_order=4, far_separation=4.0, visibility_samples=3,

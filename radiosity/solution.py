@@ -30,7 +30,13 @@ class Solution:
         Radiosity B per patch and RGB channel, W/m^2.
     F : scipy.sparse.csr_matrix or radiosity.shards.ShardedViewFactors
         The view-factor matrix used, ``F[i, j] = F(i -> j)``: on disk in shards when it did not
-        fit the memory budget (``view_factor_storage["where"] == "out of core"``).
+        fit the memory budget (``view_factor_storage["where"] == "out of core"``). In memory, rows
+        the fill left above 1 are scaled down to 1 with their reciprocal entries
+        (:func:`radiosity.methods.uniform.system.bound_rows`), so no light is created.
+    energy_gaining : list of dict
+        The patches whose rows of the filled F summed above 1, largest gain first (up to 10).
+    rows_bounded : int
+        How many rows were scaled down to 1 before the solve.
     view_factor_storage : dict
         Where F was held: ``{"where": "in memory"}``, or out of core with its shards, block size,
         passes over them, in-memory estimate and budget.
@@ -48,6 +54,8 @@ class Solution:
     view_factor_storage: dict[str, Any] = field(default_factory=lambda: {"where": "in memory"})
     # patches whose share of power landing on fronts exceeds 1 (system.gaining_patches)
     energy_gaining: list[dict] = field(default_factory=list)
+    # rows of the filled F above 1 that were scaled down to 1 before the solve (system.bound_rows)
+    rows_bounded: int = 0
     _sensors: Any = field(default=None, init=False, repr=False)
 
     @property
@@ -163,6 +171,7 @@ class Solution:
                        "fallback": self.solver.fallback} if self.solver else None,
             "energy_W": self.energy,
             "energy_gaining": self.energy_gaining,
+            "rows_bounded": self.rows_bounded,
             "emission": emission_reading(scene.emission_mode),
             "emitter_rays": scene.light_paths,
             "notes": list(scene.notes),

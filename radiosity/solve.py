@@ -17,7 +17,8 @@ from .methods.uniform.cache import FormFactorCache
 from .options import PRESETS, Options, rename_deprecated
 from .scene import Scene
 from .solution import Solution
-from .methods.uniform.system import SolverReport, energy_balance, gain_note, gaining_patches, solve_system
+from .methods.uniform.system import (SolverReport, bound_rows, energy_balance, gain_note, gaining_patches,
+                                     solve_system)
 from .visibility import Visibility
 
 __all__ = ["solve", "view_factors", "compute_view_factors", "write_view_factors", "prepare"]
@@ -176,7 +177,9 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     prepared = prepare(cut, options)  # cut already: prepare's own cut is a no-op
     prepared.timings["patches"] += cut_seconds
     cut = prepared.scene
-    F = _without(prepared.F, _inactive(cut))
+    filled = _without(prepared.F, _inactive(cut))
+    # rows above 1 would create light (escaped < 0): scale them to 1, reciprocity kept
+    F, n_bounded = bound_rows(filled, cut.patch_area)
     _memory.check_solve(F.shape[0], F.nnz, options.solver)
     t0 = time.perf_counter()
     radiosity, report = solve_system(F, cut.reflectance, cut.emission, cut.patch_area,
@@ -184,13 +187,13 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     timings = dict(prepared.timings)
     timings["solve"] = time.perf_counter() - t0
     balance = energy_balance(F, cut.patch_area, cut.reflectance, cut.emission, radiosity)
-    gaining = gaining_patches(F, cut.patch_area, radiosity, cut.patch_object, cut.objects)
-    note = gain_note(balance, gaining, options.formfactor_rtol + options.visibility_atol)
+    gaining = gaining_patches(filled, cut.patch_area, radiosity, cut.patch_object, cut.objects)
+    note = gain_note(balance, gaining, options.formfactor_rtol + options.visibility_atol, bounded=n_bounded > 0)
     if note is not None:  # rows above 1: say where, so the user can look
         warnings.warn(note, RadiosityWarning, stacklevel=2)
     return Solution(scene=cut, radiosity=radiosity, F=F, options=options, timings=timings,
                     fill=prepared.stats, solver=report, energy=balance, cache_hit=prepared.cache_hit,
-                    energy_gaining=gaining)
+                    energy_gaining=gaining, rows_bounded=n_bounded)
 
 
 def _solve_out_of_core(cut, options, refusal: MemoryBudgetError, timings: dict[str, float]):

@@ -4,7 +4,8 @@
   seen by one of its walls) hides nothing: exact shadows used to clip it to a sliver of
   round-off width whose edge planes cut the whole source away (concentric prisms: inner rows
   0.548 instead of 1).
-* The energy balance names the patches whose rows sum above 1 (what makes "escaped" negative).
+* The energy balance names the patches whose rows sum above 1 (what makes "escaped" negative),
+  and ``solve`` scales those rows down to 1 with their reciprocal entries (``bound_rows``).
 """
 
 from __future__ import annotations
@@ -14,9 +15,11 @@ import warnings
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from hypothesis import given
+from hypothesis import strategies as st
 
 import radiosity
-from radiosity.methods.uniform.system import energy_balance, gain_note, gaining_patches
+from radiosity.methods.uniform.system import bound_rows, energy_balance, gain_note, gaining_patches, solve_system
 from helpers import make_vis, prism, write_obj
 
 RING = 12
@@ -119,6 +122,51 @@ def test_gaining_rows_are_named():
     note = gain_note(balance, gaining)
     assert "lid patch 1 (row sum 1+1.0e-03)" in note and "escaped" in note
     assert gain_note(balance, gaining, tol=1e-2) is None  # within the fill's tolerance: no note
+
+
+def test_bounded_rows_make_a_furnace_exact():
+    """Rows 1 + 1e-3 scaled down to 1: the two-patch furnace then gives B = E / (1 - rho)."""
+    F, area, rho, e, _ = _two_patch_furnace(1e-3)
+    bounded, n = bound_rows(F, area)
+    assert n == 2
+    np.testing.assert_allclose(np.asarray(bounded.sum(axis=1)).ravel(), 1.0, rtol=1e-15)
+    B, _ = solve_system(bounded, rho, e, area)
+    np.testing.assert_allclose(B, 2.0, rtol=1e-12)
+    balance = energy_balance(bounded, area, rho, e, B)
+    assert min(balance["escaped"]) >= -1e-12
+    gaining = gaining_patches(F, area, B, np.array([0, 1]), ["floor", "lid"])
+    note = gain_note(balance, gaining, bounded=True)
+    assert "scaled down to 1" in note and "lid patch" in note and "floor patch" in note
+    assert gain_note(balance, gaining, tol=1e-2, bounded=True) is None  # within the fill's tolerance
+
+
+def test_rows_within_one_are_left_alone():
+    F, area, *_ = _two_patch_furnace(-1e-3)
+    bounded, n = bound_rows(F, area)
+    assert n == 0 and bounded is F
+
+
+@given(st.integers(2, 12), st.integers(0, 2**31 - 1), st.floats(0.0, 0.05))
+def test_bound_rows_keeps_reciprocity_and_caps_every_row(n, seed, gain):
+    """Random reciprocal F (A_i F_ij symmetric) with rows near 1: after the bound every row is at
+    most 1, reciprocity still holds, entries only fall, and by at most their rows' larger excess."""
+    rng = np.random.default_rng(seed)
+    area = rng.uniform(0.1, 10.0, n)
+    g = rng.uniform(0.0, 1.0, (n, n)) * (rng.uniform(size=(n, n)) < 0.6)
+    g = np.triu(g, 1)
+    g = g + g.T  # A_i F_ij, symmetric
+    rows = g.sum(axis=1) / area
+    g *= (1.0 + gain * rng.uniform(-1, 1, n))[:, None] / np.where(rows > 0, rows, 1.0)[:, None]
+    g = np.minimum(g, g.T)  # symmetric again, rows near 1 + gain
+    F = sp.csr_matrix(g / area[:, None])
+    bounded, _ = bound_rows(F, area)
+    before, after = F.toarray(), bounded.toarray()
+    assert np.asarray(after.sum(axis=1)).max() <= 1.0 + 1e-9
+    np.testing.assert_allclose(area[:, None] * after, (area[:, None] * after).T, rtol=1e-12, atol=1e-15)
+    assert (after <= before + 1e-15).all() and (after >= 0).all()
+    excess = np.maximum(before.sum(axis=1) - 1.0, 0.0)
+    worst = np.maximum(excess[:, None], excess[None, :])
+    assert (before - after <= worst * before + 1e-15).all()
 
 
 # ---------------------------------------------------------------- a closed room with boxes

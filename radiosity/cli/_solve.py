@@ -124,9 +124,11 @@ def format_summary(solution, load_seconds: float, compile_seconds: float = 0.0) 
     lines.append("emission   " + _emission_line(s["emission"]["ke_read_as"]))
     lines.append("energy (W) emitted " + fmt3(em) + "  absorbed " + fmt3(ab) + "  escaped " + fmt3(es))
     gaining = s.get("energy_gaining") or []
-    if (es < 0).any() and gaining:  # name the rows of F above 1 that make "escaped" negative
+    bounded = s.get("rows_bounded") or 0
+    if ((es < 0).any() or bounded) and gaining:  # name the rows of F above 1 (they create light)
         lines.append("gaining    " + ", ".join(f"{g['object']} patch {g['patch']} (row sum 1{g['share'] - 1:+.1e})"
-                                              for g in gaining[:5]))
+                                              for g in gaining[:5])
+                     + (f"; {bounded:,} rows scaled down to 1 before the solve" if bounded else ""))
     rays = s.get("emitter_rays")
     if rays:
         # "escaped" above mixes openings and back faces; the emitters' rays tell them apart.
