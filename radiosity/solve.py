@@ -17,8 +17,8 @@ from .methods.uniform.cache import FormFactorCache
 from .options import PRESETS, Options, rename_deprecated
 from .scene import Scene
 from .solution import Solution
-from .methods.uniform.system import (SolverReport, bound_rows, energy_balance, gain_note, gaining_patches,
-                                     solve_system)
+from .methods.uniform.system import (SolverReport, bound_rows, energy_balance, gain_note, gained_power,
+                                     gaining_patches, solve_system)
 from .visibility import Visibility
 
 __all__ = ["solve", "view_factors", "compute_view_factors", "write_view_factors", "prepare"]
@@ -188,7 +188,8 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     timings["solve"] = time.perf_counter() - t0
     balance = energy_balance(F, cut.patch_area, cut.reflectance, cut.emission, radiosity)
     gaining = gaining_patches(filled, cut.patch_area, radiosity, cut.patch_object, cut.objects)
-    note = gain_note(balance, gaining, options.formfactor_rtol + options.visibility_atol, bounded=n_bounded > 0)
+    gained = gained_power(filled, cut.patch_area, radiosity) if n_bounded else None
+    note = gain_note(balance, gaining, options.formfactor_rtol + options.visibility_atol, gained=gained)
     if note is not None:  # rows above 1: say where, so the user can look
         warnings.warn(note, RadiosityWarning, stacklevel=2)
     return Solution(scene=cut, radiosity=radiosity, F=F, options=options, timings=timings,

@@ -19,7 +19,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import radiosity
-from radiosity.methods.uniform.system import bound_rows, energy_balance, gain_note, gaining_patches, solve_system
+from radiosity.methods.uniform.system import (bound_rows, energy_balance, gain_note, gained_power, gaining_patches,
+                                              solve_system)
 from helpers import make_vis, prism, write_obj
 
 RING = 12
@@ -135,9 +136,12 @@ def test_bounded_rows_make_a_furnace_exact():
     balance = energy_balance(bounded, area, rho, e, B)
     assert min(balance["escaped"]) >= -1e-12
     gaining = gaining_patches(F, area, B, np.array([0, 1]), ["floor", "lid"])
-    note = gain_note(balance, gaining, bounded=True)
+    gained = gained_power(F, area, B)
+    np.testing.assert_allclose(gained, 2 * 1e-3 * 2.0)  # two rows 1e-3 over, B = 2, area 1
+    note = gain_note(balance, gaining, gained=gained)
     assert "scaled down to 1" in note and "lid patch" in note and "floor patch" in note
-    assert gain_note(balance, gaining, tol=1e-2, bounded=True) is None  # within the fill's tolerance
+    assert "2.00e-03 of the emitted power" in note  # 4e-3 W of the 2 W emitted per channel
+    assert gain_note(balance, gaining, tol=1e-2, gained=gained) is None  # within the fill's tolerance
 
 
 def test_rows_within_one_are_left_alone():

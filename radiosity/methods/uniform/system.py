@@ -11,7 +11,8 @@ import scipy.sparse.linalg as spla
 
 from ..._errors import RadiosityError, RadiosityWarning
 
-__all__ = ["SolverReport", "solve_system", "energy_balance", "gaining_patches", "bound_rows", "SOLVERS"]
+__all__ = ["SolverReport", "solve_system", "energy_balance", "gaining_patches", "gained_power", "bound_rows",
+           "SOLVERS"]
 
 SOLVERS = ("auto", "direct", "bicgstab", "gmres", "jacobi", "gauss-seidel", "progressive")
 
@@ -225,28 +226,42 @@ def gaining_patches(F: sp.csr_matrix, area: np.ndarray, radiosity: np.ndarray, p
 
 
 def gain_note(energy: dict[str, list[float]], gaining: list[dict], tol: float = ESCAPED_ROUND_OFF, *,
-              bounded: bool = False) -> str | None:
-    """A note naming the patches that gain, when they gain more than ``tol``; else None.
+              gained: np.ndarray | None = None) -> str | None:
+    """A note naming the patches that gain, when the light they gain exceeds ``tol``; else None.
 
     :func:`radiosity.solve` passes the fill's own tolerance (``formfactor_rtol +
     visibility_atol``): a closed cube at draft has rows 1 + 2.9e-7, which is the quadrature's
-    error, not news. ``bounded``: those rows were scaled down (:func:`bound_rows`) before the
-    solve, so the note says so instead of reporting a negative "escaped" in ``energy``.
+    error, not news. Without ``gained`` the test is "escaped" below ``-tol`` x emitted. With
+    ``gained`` ((3,) W: the power the filled F's rows above 1 would create, before
+    :func:`bound_rows` scaled them to 1) it is ``gained`` above ``tol`` x emitted, and the note
+    says the rows were scaled.
     """
     tol = max(tol, ESCAPED_ROUND_OFF)
-    emitted = np.asarray(energy["emitted"], float)
-    escaped = np.asarray(energy["escaped"], float)
-    negative = (escaped < -tol * np.abs(emitted)).any()
-    if not gaining or not (negative or (bounded and max(g["share"] for g in gaining) - 1.0 > tol)):
+    emitted = np.abs(np.asarray(energy["emitted"], float))
+    if gained is None:
+        over = (np.asarray(energy["escaped"], float) < -tol * emitted).any()
+    else:
+        over = (np.asarray(gained, float) > tol * emitted).any()
+    if not gaining or not over:
         return None
     worst = ", ".join(f"{g['object']} patch {g['patch']} (row sum 1{g['share'] - 1:+.1e})" for g in gaining[:5])
     advice = "a finer preset or tighter formfactor_rtol / visibility_atol reduces it"
-    if bounded:
-        return (f"energy balance: rows of F summed above 1, most at {worst}; they were scaled down to 1, with "
-                f"their partners' entries (reciprocity kept), so that the fill creates no light; {advice}")
-    share = float((-escaped / np.where(emitted > 0, emitted, 1.0)).max())
+    if gained is not None:
+        share = float((np.asarray(gained, float) / np.where(emitted > 0, emitted, 1.0)).max())
+        return (f"energy balance: rows of F summed above 1 ({share:.2e} of the emitted power would be created), "
+                f"most at {worst}; they were scaled down to 1, with their partners' entries (reciprocity kept), "
+                f"so that no light is created; {advice}")
+    share = float((-np.asarray(energy["escaped"], float) / np.where(emitted > 0, emitted, 1.0)).max())
     return (f"energy balance: 'escaped' is negative ({share:.2e} of the emitted power): rows of F sum above 1, "
             f"most at {worst}; {advice}")
+
+
+def gained_power(F: sp.csr_matrix, area: np.ndarray, radiosity: np.ndarray) -> np.ndarray:
+    """(3,) W: the light that the rows of ``F`` above 1 create, sum_j max(share_j - 1, 0) A_j B_j."""
+    area = np.asarray(area, float)
+    share = (F.T @ area) / np.where(area > 0, area, 1.0)
+    excess = np.where(area > 0, np.maximum(share - 1.0, 0.0), 0.0)
+    return (excess * area) @ np.asarray(radiosity, float).reshape(len(area), -1)
 
 
 def bound_rows(F: sp.csr_matrix, area: np.ndarray, tol: float = ESCAPED_ROUND_OFF) -> tuple[sp.csr_matrix, int]:
