@@ -124,18 +124,22 @@ class ViewFactors:
         What was enforced on F.
     settings : dict
         Fill tolerances (``formfactor_rtol``, ``visibility_rtol``, the file key of ``visibility_atol``) and the preset.
+    error : (n, n) scipy.sparse.csr_matrix or None
+        Estimated absolute error of each entry (``compute_view_factors(..., error_estimate=True)``).
     """
 
     F: sp.csr_matrix
     scene: Scene
     enforced: str = "none"
     settings: dict = field(default_factory=dict)
+    error: sp.csr_matrix | None = None
 
     def __post_init__(self):
         n = self.scene.n_patches
-        if self.F.shape != (n, n):
-            msg = f"view-factor matrix of shape {self.F.shape} does not belong to a scene of {n} patches"
-            raise ValueError(msg)
+        for name, matrix in (("view-factor matrix", self.F), ("error estimate", self.error)):
+            if matrix is not None and matrix.shape != (n, n):
+                msg = f"{name} of shape {matrix.shape} does not belong to a scene of {n} patches"
+                raise ValueError(msg)
 
     @property
     def active(self) -> np.ndarray:

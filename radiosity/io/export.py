@@ -218,6 +218,9 @@ def view_factor_arrays(F, area=None, patch_object=None, objects=None, *, grouped
         extra = {"patch_quads": scene.patch_quads, "patch_face": scene.patch_face, "patch_hidden": scene.patch_hidden,
                  "patch_obstruction": scene.patch_obstruction, "sky_factor": vf.sky_factor,
                  "enforced": np.array(vf.enforced), **{k: np.array(v) for k, v in vf.settings.items()}}
+        if vf.error is not None:  # same layout as F: error_data, error_indices, error_indptr
+            E = sp.csr_matrix(vf.error)
+            extra.update(error_data=E.data, error_indices=E.indices, error_indptr=E.indptr)
     F = sp.csr_matrix(F)
     n = F.shape[0]
     if F.shape != (n, n) or len(area) != n or len(patch_object) != n:
