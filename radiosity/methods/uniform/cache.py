@@ -29,6 +29,10 @@ from .assembly import FillSettings, FillStats
 __all__ = ["FormFactorCache", "cache_dir", "cache_limit"]
 
 FORMAT_VERSION = 1
+# Part of every key: bump it when the fill gives different numbers for the same settings, so
+# that no cached matrix of the older rules is served. 2: the fine preset's exact shadows at fixed
+# receiver points (visibility._constants.SHADOW_CELLS_BELOW), after SHADOW_ORDER_EXTRA.
+FILL_VERSION = 2
 ENV_SIZE = "RADIOSITY_CACHE_SIZE"
 DEFAULT_LIMIT = 2 << 30  # 2 GiB: a few hundred Cornell-box-sized matrices, a handful of big ones
 
@@ -68,8 +72,8 @@ class FormFactorCache:
 
     @staticmethod
     def key(geometry_hash: str, settings: FillSettings) -> str:
-        text = json.dumps({"geometry": geometry_hash, "settings": asdict(settings), "v": FORMAT_VERSION},
-                          sort_keys=True)
+        text = json.dumps({"geometry": geometry_hash, "settings": asdict(settings), "v": FORMAT_VERSION,
+                           "fill": FILL_VERSION}, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:32]
 
     def path(self, geometry_hash: str, settings: FillSettings) -> Path:
