@@ -37,6 +37,9 @@ class Solution:
         The patches whose rows of the filled F summed above 1, largest gain first (up to 10).
     rows_bounded : int
         How many rows were scaled down to 1 before the solve.
+    gain_beyond_tolerance : bool
+        Whether the light those rows would have created exceeds the fill's tolerance
+        (``formfactor_rtol + visibility_atol``) times the emitted power: ``solve`` warned.
     view_factor_storage : dict
         Where F was held: ``{"where": "in memory"}``, or out of core with its shards, block size,
         passes over them, in-memory estimate and budget.
@@ -56,6 +59,7 @@ class Solution:
     energy_gaining: list[dict] = field(default_factory=list)
     # rows of the filled F above 1 that were scaled down to 1 before the solve (system.bound_rows)
     rows_bounded: int = 0
+    gain_beyond_tolerance: bool = False
     _sensors: Any = field(default=None, init=False, repr=False)
 
     @property
@@ -172,6 +176,7 @@ class Solution:
             "energy_W": self.energy,
             "energy_gaining": self.energy_gaining,
             "rows_bounded": self.rows_bounded,
+            "gain_beyond_tolerance": self.gain_beyond_tolerance,
             "emission": emission_reading(scene.emission_mode),
             "emitter_rays": scene.light_paths,
             "notes": list(scene.notes),

@@ -194,7 +194,7 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
         warnings.warn(note, RadiosityWarning, stacklevel=2)
     return Solution(scene=cut, radiosity=radiosity, F=F, options=options, timings=timings,
                     fill=prepared.stats, solver=report, energy=balance, cache_hit=prepared.cache_hit,
-                    energy_gaining=gaining, rows_bounded=n_bounded)
+                    energy_gaining=gaining, rows_bounded=n_bounded, gain_beyond_tolerance=note is not None)
 
 
 def _solve_out_of_core(cut, options, refusal: MemoryBudgetError, timings: dict[str, float]):

@@ -217,3 +217,8 @@ def test_cli_summary_prints_the_gaining_rows():
     assert "gaining    lid patch 1 (row sum 1+1.0e-03)" in text
     summary["energy_W"]["escaped"] = [0.0] * 3
     assert "gaining" not in format_summary(type("S", (), {"summary": lambda self: summary})(), 0.0)
+    summary.update(rows_bounded=1, gain_beyond_tolerance=True)  # bounded, and it mattered
+    assert "; 1 rows scaled down to 1 before the solve" in format_summary(
+        type("S", (), {"summary": lambda self: summary})(), 0.0)
+    summary["gain_beyond_tolerance"] = False  # within the fill's tolerance: not news
+    assert "gaining" not in format_summary(type("S", (), {"summary": lambda self: summary})(), 0.0)

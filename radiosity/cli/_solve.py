@@ -125,7 +125,9 @@ def format_summary(solution, load_seconds: float, compile_seconds: float = 0.0) 
     lines.append("energy (W) emitted " + fmt3(em) + "  absorbed " + fmt3(ab) + "  escaped " + fmt3(es))
     gaining = s.get("energy_gaining") or []
     bounded = s.get("rows_bounded") or 0
-    if ((es < 0).any() or bounded) and gaining:  # name the rows of F above 1 (they create light)
+    # name the rows of F above 1 where they matter: "escaped" negative, or (bounded) gaining more
+    # than the fill's tolerance; the bundled box's 1 + 7e-5 rows are not news
+    if ((es < 0).any() or s.get("gain_beyond_tolerance")) and gaining:
         lines.append("gaining    " + ", ".join(f"{g['object']} patch {g['patch']} (row sum 1{g['share'] - 1:+.1e})"
                                               for g in gaining[:5])
                      + (f"; {bounded:,} rows scaled down to 1 before the solve" if bounded else ""))
