@@ -185,41 +185,41 @@ def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettin
     frac = np.ones(len(part))
     local = np.full(len(nz), -1)
     local[part] = np.arange(len(part))
-    if (~exact).any():
-        sel = np.flatnonzero(~exact)
+    pair_of = local[rows]  # partly occluded pair of each (pair, occluder) row
+
+    def subset(sel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The (pair, occluder) rows of the partly occluded pairs ``sel``, renumbered 0..len(sel)-1."""
         where = np.full(len(part), -1)
         where[sel] = np.arange(len(sel))
-        keep = where[local[rows]] >= 0
+        keep = where[pair_of] >= 0
+        return where[pair_of[keep]], occ[keep]
+
+    if (~exact).any():
+        sel = np.flatnonzero(~exact)
+        sub_rows, sub_occ = subset(sel)
         frac[sel] = visibility.ray_fraction(pi[sel], pj[sel], settings.visibility_samples,
-                                            settings.visibility_max_samples, rows=where[local[rows[keep]]],
-                                            occ=occ[keep])
+                                            settings.visibility_max_samples, rows=sub_rows, occ=sub_occ)
     if exact.any():
         stats.n_exact_pairs += int(exact.sum())
         tight = settings.formfactor_rtol < SHADOW_CELLS_BELOW and settings.visibility_rtol < SHADOW_CELLS_BELOW
-        cells = exact & (np.bincount(local[rows], minlength=len(part)) <= MAX_CELL_OCCLUDERS) if tight else None
+        cells = exact & (np.bincount(pair_of, minlength=len(part)) <= MAX_CELL_OCCLUDERS) if tight else None
         if cells is not None and cells.any():
             sel = np.flatnonzero(cells)
-            where = np.full(len(part), -1)
-            where[sel] = np.arange(len(sel))
-            keep = where[local[rows]] >= 0
             # the hidden part over receiver cells cut along the shadow's edges: F = F_unoccluded - hidden
             unocc = f[nz[part[sel]]]
-            hidden = visibility.exact_hidden(pi[sel], pj[sel], where[local[rows[keep]]], occ[keep],
+            hidden = visibility.exact_hidden(pi[sel], pj[sel], *subset(sel),
                                              SHADOW_RTOL_SHARE * settings.formfactor_rtol, unocc,
                                              fallback_order=max(settings.near_order, 8))
             seen = np.clip(unocc - hidden, 0.0, unocc)
             frac[sel] = np.where(unocc > 0, seen / np.where(unocc > 0, unocc, 1.0), 1.0)
             exact = exact & ~cells
-        # the rest: exact shadows at near_order x near_order Gauss points of the receiver, far
-        # pairs too. One point (the centroid) made a far pair all seen or all hidden: in a closed
-        # room of boxes at the default preset rows summed to 0.994-1.008 with it, 0.9992-1.0007
-        # with 3 x 3 points (bench/closed_boxes.py, docs/visibility.md).
+        # the rest: exact shadows at fixed Gauss points of the receiver, far pairs too. One point
+        # (the centroid) made a far pair all seen or all hidden: in a closed room of boxes at the
+        # default preset rows summed to 0.994-1.008 with it, 0.9992-1.0007 with 3 x 3 points
+        # (bench/closed_boxes.py, docs/visibility.md).
         if exact.any():
             sel = np.flatnonzero(exact)
-            where = np.full(len(part), -1)
-            where[sel] = np.arange(len(sel))
-            keep = where[local[rows]] >= 0
-            frac[sel] = visibility.exact_fraction(pi[sel], pj[sel], where[local[rows[keep]]], occ[keep],
+            frac[sel] = visibility.exact_fraction(pi[sel], pj[sel], *subset(sel),
                                                   settings.near_order + SHADOW_ORDER_EXTRA)
     f[nz[part]] *= frac
 
