@@ -18,7 +18,7 @@ from ._validate import reject_unknown
 from .geometry import centroids_and_areas, polygon_normals
 from .io.obj import read_obj
 from .imprint import subdivide_imprinted
-from .patches import FaceReport, Patches, planar_parts, subdivide_faces
+from .patches import FaceReport, Patches, planar_parts, subdivide_faces, used_vertices
 
 __all__ = ["Scene", "load_scene", "bundled_scene"]
 
@@ -238,8 +238,10 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
     kept = np.flatnonzero(keep)
     faces = [data.faces[k] for k in kept]
     _memory.check_patches(vertices, faces, max_patch_size)  # refuse before cutting, not during
+    uncut = True  # no face was imprinted: with max_patch_size None the patches are the light paths' faces
     if options.get("imprint", True):
-        patches, report, _ = subdivide_imprinted(vertices, faces, data.face_object[kept], max_patch_size)
+        patches, report, cut = subdivide_imprinted(vertices, faces, data.face_object[kept], max_patch_size)
+        uncut = cut.uncut
     else:
         patches, report = subdivide_faces(vertices, faces, max_patch_size)
     patches, report = _in_file_faces(patches, report, kept)
@@ -254,7 +256,8 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
     if not em.any():
         notes.append(f"{data.path}: no face emits light (no material used has Ke > 0); "
                      "the solution is all zero")
-    paths = _emitter_paths(data, vertices, faces, kept, emission)
+    paths = _emitter_paths(data, vertices, faces, kept, emission,
+                           patches if uncut and max_patch_size is None else None)
     notes += light_path_notes(paths, str(data.path))
     for note in notes:
         if MEASURED not in note:  # the package's own measured data is no surprise to warn about
@@ -276,11 +279,14 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
     )
 
 
-def _emitter_paths(data, vertices: np.ndarray, faces: list[np.ndarray], kept: np.ndarray, emission: str):
+def _emitter_paths(data, vertices: np.ndarray, faces: list[np.ndarray], kept: np.ndarray, emission: str,
+                   coarse: Patches | None = None):
     """Where the emitters' light first lands (``_lightpaths``), traced on the faces as written
-    (one patch per face, no imprint): the cost does not grow with ``max_patch_size``."""
-    coarse, report = subdivide_faces(vertices, faces, None)
-    coarse, _ = _in_file_faces(coarse, report, kept)
+    (one patch per face, no imprint): the cost does not grow with ``max_patch_size``.
+    ``coarse``: those patches if the caller has them (faces uncut, no size limit)."""
+    if coarse is None:
+        coarse, report = subdivide_faces(vertices, faces, None)
+        coarse, _ = _in_file_faces(coarse, report, kept)
     if coarse.n_patches == 0:
         return None
     ke = np.array([m.ke for m in data.materials] + [(0.0, 0.0, 0.0)], dtype=float).reshape(-1, 3)
@@ -310,7 +316,7 @@ def _units_notes(data, units: str | None) -> list[str]:
     """A note when no units were given and the scene looks like millimetres (over 50 m across)."""
     if units is not None or not data.faces:
         return []
-    used = np.unique(np.concatenate(data.faces))
+    used = used_vertices(data.faces, len(data.vertices))
     extent = float(np.ptp(data.vertices[used], axis=0).max())
     if extent <= _MM_HINT_EXTENT:
         return []
