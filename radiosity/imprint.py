@@ -175,17 +175,20 @@ def _near_other_objects(vertices: np.ndarray, faces: list[np.ndarray], face_obje
     """
     if not faces:
         return np.zeros(0, bool)
-    corners = np.concatenate(faces)
-    starts = np.cumsum([0] + [len(f) for f in faces[:-1]])
-    if (np.diff(np.append(starts, len(corners))) == 0).any():
+    sizes = np.fromiter(map(len, faces), np.int64, len(faces))
+    if (sizes == 0).any():
         return np.ones(len(faces), bool)  # an empty face: let the parts decide, as before
-    lo = np.minimum.reduceat(vertices[corners], starts, axis=0)
-    hi = np.maximum.reduceat(vertices[corners], starts, axis=0)
+    points = vertices[np.concatenate(faces)]
+    starts = np.cumsum(sizes) - sizes
+    lo = np.minimum.reduceat(points, starts, axis=0)
+    hi = np.maximum.reduceat(points, starts, axis=0)
     objects, which = np.unique(face_object, return_inverse=True)
-    obj_lo = np.full((len(objects), 3), np.inf)
-    obj_hi = np.full((len(objects), 3), -np.inf)
-    np.minimum.at(obj_lo, which, lo)
-    np.maximum.at(obj_hi, which, hi)
+    which = which.reshape(-1)
+    # Each object's box: faces grouped by object (ufunc.at took a second on 581k faces).
+    order = np.argsort(which, kind="stable")
+    first = np.searchsorted(which[order], np.arange(len(objects)))
+    obj_lo = np.minimum.reduceat(lo[order], first, axis=0)
+    obj_hi = np.maximum.reduceat(hi[order], first, axis=0)
     index = _BoxIndex(obj_lo, obj_hi)
     near = np.array([len(index.meeting(obj_lo[k] - pad, obj_hi[k] + pad)) > 1 for k in range(len(objects))],
                     dtype=bool)  # itself and another
@@ -195,20 +198,17 @@ def _near_other_objects(vertices: np.ndarray, faces: list[np.ndarray], face_obje
 def _make_parts(vertices: np.ndarray, faces: list[np.ndarray], face_object: np.ndarray,
                 active: np.ndarray | None = None) -> tuple[list[_Part], list[float]]:
     parts: list[_Part] = []
-    deviations: list[float] = []
-    for index, face in enumerate(faces):
-        if active is not None and not active[index]:
-            deviations.append(0.0)
-            continue
+    deviations = [0.0] * len(faces)
+    for index in (range(len(faces)) if active is None else np.flatnonzero(active).tolist()):
+        face = faces[index]
         poly = vertices[face]
         size = float(np.ptp(poly, axis=0).max()) if len(poly) else 0.0
         newell = vector_area(poly)
         area = float(np.linalg.norm(newell))
-        deviations.append(0.0)
         if not area > 1e-12 * size**2:
             continue  # degenerate: subdivision reports it
         pieces, deviation = planar_parts(poly, size)
-        deviations[-1] = deviation
+        deviations[index] = deviation
         for piece in pieces:
             normal = vector_area(piece)
             area = float(np.linalg.norm(normal))
