@@ -152,24 +152,25 @@ class Scene:
         vertex across the fold (``patches._fold_cells``) instead of leaving a crease.
         """
         quads = self.patch_quads
+        n = len(quads)
         is_triangle = (quads[:, 3] == quads[:, 2]).all(axis=1)
-        faces, owner = [], []
-        i = 0
-        while i < len(quads):
-            if (i + 1 < len(quads) and is_triangle[i] and is_triangle[i + 1]
-                    and self.patch_face[i] == self.patch_face[i + 1]
-                    and self.patch_hidden[i] == self.patch_hidden[i + 1]
-                    and np.array_equal(quads[i, 0], quads[i + 1, 0]) and np.array_equal(quads[i, 2], quads[i + 1, 1])):
-                quad = np.concatenate([quads[i, :3], quads[i + 1, 2:3]])
-                if planar_parts(quad, float(np.ptp(quad, axis=0).max()))[1] > 0.0:
-                    faces.append(np.array([4 * i, 4 * i + 1, 4 * i + 2, 4 * i + 6]))
-                    owner.append(i)
-                    i += 2
-                    continue
-            faces.append(np.arange(4 * i, 4 * i + (3 if is_triangle[i] else 4)))
-            owner.append(i)
-            i += 1
-        return faces, np.asarray(owner, dtype=np.int64)
+        # Candidate pairs (i, i + 1) on arrays; a per-patch loop took seconds on 581k patches.
+        pair = (is_triangle[:-1] & is_triangle[1:] & (self.patch_face[:-1] == self.patch_face[1:])
+                & (self.patch_hidden[:-1] == self.patch_hidden[1:])
+                & (quads[:-1, 0] == quads[1:, 0]).all(axis=1) & (quads[:-1, 2] == quads[1:, 1]).all(axis=1))
+        folded: list[int] = []
+        for i in np.flatnonzero(pair).tolist():  # left to right: a patch joins one pair at most
+            if folded and folded[-1] == i - 1:
+                continue
+            quad = np.concatenate([quads[i, :3], quads[i + 1, 2:3]])
+            if planar_parts(quad, float(np.ptp(quad, axis=0).max()))[1] > 0.0:
+                folded.append(i)
+        folds = np.asarray(folded, dtype=np.int64)
+        owner = np.delete(np.arange(n, dtype=np.int64), folds + 1)
+        corners = 4 * owner[:, None] + np.arange(4)
+        corners[np.searchsorted(owner, folds), 3] = 4 * folds + 6
+        sizes = np.where(is_triangle[owner] & ~np.isin(owner, folds), 3, 4).tolist()
+        return [row[:k] for row, k in zip(corners, sizes)], owner
 
 
 def _check_materials(rho: np.ndarray, emission: np.ndarray, where: str) -> None:
