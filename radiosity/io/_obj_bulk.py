@@ -151,21 +151,55 @@ def scan_text(text: str) -> Scan:
     keep = np.flatnonzero(kind != -2)
     renumber = np.cumsum(kind != -2) - 1
     words = {int(renumber[i]): w for i, w in words.items()}
-    return Scan(keep + 1, kind[keep], words, _bodies(buf, first, cut, ends, kind == V),
-                _bodies(buf, first, cut, ends, kind == F))
+    return Scan(keep + 1, kind[keep], words, _bodies(buf, first, cut, ends, kind == V, starts),
+                _bodies(buf, first, cut, ends, kind == F, starts))
 
 
-def _bodies(buf: np.ndarray, first: np.ndarray, cut: np.ndarray, ends: np.ndarray, rows: np.ndarray) -> np.ndarray:
+# At most this many runs of consecutive lines are sliced out whole (``_bodies``); more go by a mask.
+_MAX_RUNS = 10_000
+
+
+def _bodies(buf: np.ndarray, first: np.ndarray, cut: np.ndarray, ends: np.ndarray, rows: np.ndarray,
+            starts: np.ndarray | None = None) -> np.ndarray:
     """The bytes after the keyword (one byte) up to the comment of the lines ``rows``, each
     followed by a newline."""
     if not rows.any():
         return np.zeros(0, np.uint8)
+    if starts is not None:
+        out = _bodies_by_runs(buf, first, cut, ends, np.flatnonzero(rows), starts)
+        if out is not None:
+            return out
     marks = np.zeros(len(buf) + 1, np.int8)
     marks[first[rows] + 1] = 1  # the lines' spans are disjoint and non-empty: no position repeats
     marks[cut[rows]] = -1
     inside = np.cumsum(marks[:-1], dtype=np.int8) > 0
     inside[ends[rows]] = True
     out = buf[inside]
+    if _UNUSUAL_BYTES[out].any():
+        raise Irregular("unusual characters")
+    return out
+
+
+def _bodies_by_runs(buf: np.ndarray, first: np.ndarray, cut: np.ndarray, ends: np.ndarray, rows: np.ndarray,
+                    starts: np.ndarray) -> np.ndarray | None:
+    """:func:`_bodies` when the lines have no leading blanks and no comments and come in few runs
+    of consecutive lines (as exporters write ``v`` and ``f`` blocks): each run is one slice, less
+    its keyword bytes; None otherwise. A mask and a running sum over every byte of the file cost
+    about a second on 43 MB."""
+    if not ((first[rows] == starts[rows]).all() and (cut[rows] == ends[rows]).all()):
+        return None
+    breaks = np.flatnonzero(np.diff(rows) != 1)
+    if len(breaks) >= _MAX_RUNS:
+        return None
+    run_first, run_last = rows[np.r_[0, breaks + 1]], rows[np.r_[breaks, len(rows) - 1]]
+    out = np.concatenate([buf[starts[a]:ends[b] + 1] for a, b in zip(run_first.tolist(), run_last.tolist())])
+    lengths = ends[run_last] + 1 - starts[run_first]
+    base = np.cumsum(lengths) - lengths  # where each run begins in ``out``
+    run_of = np.repeat(np.arange(len(run_first)), np.diff(np.r_[0, breaks + 1, len(rows)]))
+    keyword = starts[rows] - starts[run_first][run_of] + base[run_of]
+    keep = np.ones(len(out), bool)
+    keep[keyword] = False
+    out = out[keep]
     if _UNUSUAL_BYTES[out].any():
         raise Irregular("unusual characters")
     return out
