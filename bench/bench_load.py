@@ -244,9 +244,12 @@ def against(side: int, revision: str, repeat: int, out) -> None:
         for _ in range(repeat):
             for name, package in (("before", tmp), ("after", str(root))):
                 result = Path(tmp) / f"{name}.pkl"
-                env = dict(os.environ, PYTHONPATH=package)
-                subprocess.run([sys.executable, "-c", _ONE_LOAD, str(path), str(result)], env=env, check=True)
+                env = dict(os.environ, PYTHONPATH=package)  # and cwd: ``-c`` puts the cwd first on sys.path
+                subprocess.run([sys.executable, "-c", _ONE_LOAD, str(path), str(result)], env=env, cwd=package,
+                               check=True)
                 runs[name].append(pickle.loads(result.read_bytes()))
+                if not runs[name][-1]["package"].startswith(package):
+                    raise RuntimeError(f"{name}: imported {runs[name][-1]['package']}, not the package in {package}")
     before, after = runs["before"][-1], runs["after"][-1]
     same = (all(np.asarray(before["arrays"][k]).tobytes() == np.asarray(after["arrays"][k]).tobytes()
                 and np.shape(before["arrays"][k]) == np.shape(after["arrays"][k]) for k in before["arrays"])
