@@ -159,7 +159,7 @@ def terrain(side: int, out, whole: bool) -> None:
            "cut_speedup": round(t_cut_old / t_cut_new, 1), "same_patches": bool(same_cut),
            "load_no_imprint_s": round(t_plain, 2), "load_s": round(t_scene, 2), "patches": scene.n_patches}
     print_table([row], title=f"terrain {side}x{side} (seconds; ratios measured in this run)")
-    write_json("load_terrain", {"rows": [row], "machine": machine_info()}, out)
+    write_json("load_terrain_parts", {"rows": [row], "machine": machine_info()}, out)
 
 
 def _whole_loads(path: Path, faces: int) -> dict:
