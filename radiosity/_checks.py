@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .geometry import flat_faces
+
 __all__ = ["material_notes", "duplicate_faces"]
 
 # illum modes with mirror reflection or transparency (MTL spec: 3-9); 0-2 are diffuse/Phong.
@@ -114,8 +116,7 @@ def _duplicate_pairs(vertices: np.ndarray, faces: list[np.ndarray], grid: float)
     read from its smallest corner (x, then y, then z; the first of equal ones) and equal
     cycles are found by a hash of each cycle (:func:`_equal_rows`; a loop over faces took
     seconds on 500k faces, and sorting the cycles as rows a few seconds)."""
-    sizes = np.fromiter(map(len, faces), np.int64, len(faces))
-    flat = np.concatenate(faces).astype(np.int64, copy=False)
+    flat, sizes = flat_faces(faces)
     offsets = np.cumsum(sizes) - sizes
     on_grid = np.round(vertices / grid).astype(np.int64)  # per vertex: the same numbers as per corner
     pairs: list[tuple[int, int]] = []

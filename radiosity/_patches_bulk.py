@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _tol
-from .geometry import vector_areas
+from .geometry import flat_faces, vector_areas
 
 __all__ = ["whole_faces"]
 
@@ -32,9 +32,8 @@ def whole_faces(vertices: np.ndarray, faces: list[np.ndarray], max_size: float |
     cells = np.empty((n, 4, 3))
     if not n:
         return verdict, cells
-    sizes = np.fromiter(map(len, faces), np.int64, n)
-    offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    flat = np.concatenate(faces).astype(np.int64, copy=False)
+    flat, sizes = flat_faces(faces)
+    offsets = np.cumsum(sizes) - sizes
     for k in (3, 4):
         rows = np.flatnonzero(sizes == k)
         if len(rows):

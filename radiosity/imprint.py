@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._errors import RadiosityWarning
-from .geometry import vector_area
+from .geometry import flat_faces, vector_area
 from .patches import FaceReport, Patches, planar_parts, subdivide_faces, used_vertices
 
 __all__ = ["Contact", "Imprinted", "imprint_faces", "subdivide_imprinted", "CONTACT_REL"]
@@ -175,10 +175,10 @@ def _near_other_objects(vertices: np.ndarray, faces: list[np.ndarray], face_obje
     """
     if not faces:
         return np.zeros(0, bool)
-    sizes = np.fromiter(map(len, faces), np.int64, len(faces))
+    flat, sizes = flat_faces(faces)
     if (sizes == 0).any():
         return np.ones(len(faces), bool)  # an empty face: let the parts decide, as before
-    points = vertices[np.concatenate(faces)]
+    points = vertices[flat]
     starts = np.cumsum(sizes) - sizes
     lo = np.minimum.reduceat(points, starts, axis=0)
     hi = np.maximum.reduceat(points, starts, axis=0)
@@ -605,7 +605,7 @@ def imprint_faces(vertices: np.ndarray, faces: list[np.ndarray], face_object: np
         warnings.warn(f"imprint: GEOS could not cut {len(failed)} face(s) along their contacts ({faces_text}); "
                       "left uncut", RadiosityWarning, stacklevel=2)
     if not cut_faces:  # nothing cut: the faces are the pieces (a per-face copy took seconds on 581k faces)
-        return Imprinted(vertices, list(faces), np.arange(len(faces), dtype=np.int64), np.zeros(len(faces), bool),
+        return Imprinted(vertices, faces, np.arange(len(faces), dtype=np.int64), np.zeros(len(faces), bool),
                          contacts, [], uncut=True)
     emit_whole(done, len(faces))
     verts = np.concatenate(out_vertices) if out_vertices else np.zeros((0, 3))

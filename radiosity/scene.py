@@ -237,7 +237,7 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
     keep, duplicate_notes = duplicate_faces(data.path, data.vertices, data.faces, data.face_line,
                                             data.face_object, data.objects)
     kept = np.flatnonzero(keep)
-    faces = [data.faces[k] for k in kept]
+    faces = data.faces if len(kept) == len(data.faces) else [data.faces[k] for k in kept]
     _memory.check_patches(vertices, faces, max_patch_size)  # refuse before cutting, not during
     uncut = True  # no face was imprinted: with max_patch_size None the patches are the light paths' faces
     if options.get("imprint", True):

@@ -26,6 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..geometry import FaceList
+
 __all__ = ["Irregular", "Scan", "scan_lines", "scan_text", "parse_vertices", "parse_faces", "KINDS"]
 
 # Bytes a v or f line may hold on this path: printable ASCII, space and tab (the separator is
@@ -336,5 +338,6 @@ def _drop_repeats(corners: np.ndarray, sizes: np.ndarray, vertices: np.ndarray) 
     kept = np.add.reduceat(keep, starts) if len(starts) else np.zeros(0, np.int64)
     keep[starts[kept == 0]] = True  # zero area: "or idx[:1]"
     flat = corners[keep]
-    bounds = np.concatenate([[0], np.cumsum(np.maximum(kept, 1))]).tolist()
-    return [flat[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
+    sizes = np.maximum(kept, 1).astype(np.int64)
+    bounds = np.concatenate([[0], np.cumsum(sizes)]).tolist()
+    return FaceList([flat[a:b] for a, b in zip(bounds[:-1], bounds[1:])], flat, sizes)
