@@ -12,12 +12,15 @@ imprints are compared for equality.
     python bench/bench_load.py --all-pairs 1000 8000
     python bench/bench_load.py --terrain       # the 581k-triangle OBJ of issue 19: reader and cutting
     python bench/bench_load.py --terrain --whole   # load_scene before (old reader, cutting, rays) / after
+    python bench/bench_load.py --terrain --against 7375bd1   # load_scene of that commit / of this tree
 
 ``--terrain [SIDE]`` writes the height field of :func:`generate_terrain` (540: 581,042 triangles,
 about 45 MB) and times, in the same run, ``read_obj`` line by line (the reader before the bulk
 path; still its path for files it cannot vouch for) against ``read_obj`` as it is, and
 ``subdivide_faces`` per face against it with the faces decided at once, then ``load_scene``
-whole, with and without imprinting.
+whole, with and without imprinting. ``--against REV`` times ``load_scene`` of the package as it
+was at git revision REV (exported to a temporary folder) against this tree's, each in a fresh
+process, alternating, best of ``--repeat``, and compares the two scenes array by array.
 """
 
 from __future__ import annotations
@@ -156,7 +159,7 @@ def terrain(side: int, out, whole: bool) -> None:
            "cut_speedup": round(t_cut_old / t_cut_new, 1), "same_patches": bool(same_cut),
            "load_no_imprint_s": round(t_plain, 2), "load_s": round(t_scene, 2), "patches": scene.n_patches}
     print_table([row], title=f"terrain {side}x{side} (seconds; ratios measured in this run)")
-    write_json("load_terrain", {"rows": [row], "machine": machine_info()}, out)
+    write_json("load_terrain_parts", {"rows": [row], "machine": machine_info()}, out)
 
 
 def _whole_loads(path: Path, faces: int) -> dict:
@@ -203,6 +206,63 @@ def _whole_loads(path: Path, faces: int) -> dict:
             "light_paths_speedup": round(t_rays_before / t_rays_after, 1)}
 
 
+_ONE_LOAD = """
+import pickle, sys, time, warnings
+import radiosity
+warnings.simplefilter("ignore")
+radiosity.load_scene(radiosity.bundled_scene("cornell_box"))  # warm-up: compiled kernels load once
+t0 = time.perf_counter()
+s = radiosity.load_scene(sys.argv[1])
+seconds = time.perf_counter() - t0
+arrays = {k: getattr(s, k) for k in ("patch_quads", "patch_object", "patch_face", "reflectance", "emission",
+                                     "patch_hidden", "face_line")}
+with open(sys.argv[2], "wb") as f:
+    pickle.dump({"seconds": seconds, "arrays": arrays, "notes": s.notes, "light_paths": s.light_paths,
+                 "objects": s.objects, "package": radiosity.__file__}, f)
+"""
+
+
+def against(side: int, revision: str, repeat: int, out) -> None:
+    """``load_scene`` of the terrain by the package at ``revision`` and by this tree, one run."""
+    import os
+    import pickle
+    import subprocess
+    import tempfile
+
+    root = Path(__file__).resolve().parents[1]
+    folder = root / "bench" / "results" / "_bench_load"
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"terrain_{side}.obj"
+    faces = generate_terrain(path, side)
+    commit = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", revision], check=True,
+                            capture_output=True, text=True).stdout.strip()
+    with tempfile.TemporaryDirectory() as tmp:
+        archive = subprocess.run(["git", "-C", str(root), "archive", commit, "radiosity"], check=True,
+                                 capture_output=True).stdout
+        subprocess.run(["tar", "-x", "-C", tmp], input=archive, check=True)
+        runs: dict[str, list] = {"before": [], "after": []}
+        for _ in range(repeat):
+            for name, package in (("before", tmp), ("after", str(root))):
+                result = Path(tmp) / f"{name}.pkl"
+                env = dict(os.environ, PYTHONPATH=package)  # and cwd: ``-c`` puts the cwd first on sys.path
+                subprocess.run([sys.executable, "-c", _ONE_LOAD, str(path), str(result)], env=env, cwd=package,
+                               check=True)
+                runs[name].append(pickle.loads(result.read_bytes()))
+                if not runs[name][-1]["package"].startswith(package):
+                    raise RuntimeError(f"{name}: imported {runs[name][-1]['package']}, not the package in {package}")
+    before, after = runs["before"][-1], runs["after"][-1]
+    same = (all(np.asarray(before["arrays"][k]).tobytes() == np.asarray(after["arrays"][k]).tobytes()
+                and np.shape(before["arrays"][k]) == np.shape(after["arrays"][k]) for k in before["arrays"])
+            and all(before[k] == after[k] for k in ("notes", "light_paths", "objects")))
+    t_before = min(r["seconds"] for r in runs["before"])
+    t_after = min(r["seconds"] for r in runs["after"])
+    row = {"faces": faces, "against": commit, "repeat": repeat, "load_before_s": round(t_before, 2),
+           "load_after_s": round(t_after, 2), "load_speedup": round(t_before / t_after, 2), "same_scene": bool(same),
+           "patches": len(after["arrays"]["patch_quads"])}
+    print_table([row], title=f"terrain {side}x{side}: load_scene at {commit} / this tree (seconds; this run)")
+    write_json("load_terrain_against", {"rows": [row], "machine": machine_info()}, out)
+
+
 def main(argv=None) -> None:
     def extra(parser):
         parser.add_argument("--sizes", type=int, nargs="+", default=None, help="face counts")
@@ -212,8 +272,13 @@ def main(argv=None) -> None:
                             help="time the reader and cutting on a SIDE x SIDE terrain (default 540)")
         parser.add_argument("--whole", action="store_true",
                             help="with --terrain: load_scene before (all old paths) against after")
+        parser.add_argument("--against", metavar="REV", default=None,
+                            help="with --terrain: load_scene of git revision REV against this tree's")
+        parser.add_argument("--repeat", type=int, default=2, help="with --against: loads per side (best taken)")
 
     args = parse_args(__doc__.splitlines()[0], argv, extra)
+    if args.terrain and args.against:
+        return against(args.terrain, args.against, args.repeat, args.out)
     if args.terrain:
         return terrain(args.terrain, args.out, args.whole)
     sizes = args.sizes or ([1000, 8000] if args.quick else [1000, 8000, 50_000, 300_000])

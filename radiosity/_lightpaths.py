@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from ._lightpaths_chunks import arrival_side, first_hits_chunked, hit_distance
+from ._lightpaths_chunks import arrival_side, chunk_boxes, first_hits_chunked, hit_distance
 
 __all__ = ["LightPaths", "trace_emitters", "N_RAYS"]
 
@@ -108,25 +108,35 @@ def _first_hits_kernel(origins, directions, v0, e1, e2, offset, hit, side):  # p
             side[r] = arrival_side(dx, dy, dz, e1, e2, best)
 
 
-def _first_hits(origins, directions, triangles, offset) -> tuple[np.ndarray, np.ndarray]:
+def _first_hits(origins, directions, triangles, offset, prepared=None) -> tuple[np.ndarray, np.ndarray]:
     """Index of the first triangle hit by each ray (-1: none) and ``dot(direction, e1 x e2)``
-    (positive: the ray arrives at the triangle's back)."""
+    (positive: the ray arrives at the triangle's back). ``prepared``: :func:`_prepare` of the
+    triangles, when they are traced more than once."""
     if len(origins) * len(triangles) <= _NUMPY_TESTS:
         return _first_hits_numpy(origins, directions, triangles, offset)
-    return _first_hits_compiled(origins, directions, triangles, offset)
+    return _first_hits_compiled(origins, directions, triangles, offset, prepared)
 
 
-def _first_hits_compiled(origins, directions, triangles, offset) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_first_hits` through the compiled kernel."""
+def _prepare(triangles) -> tuple:
+    """(v0, e1, e2, boxes) of the compiled kernels: the edges, and the run boxes if chunked."""
     triangles = np.ascontiguousarray(triangles, dtype=np.float64)
     v0 = np.ascontiguousarray(triangles[:, 0])
     e1 = np.ascontiguousarray(triangles[:, 1] - v0)
     e2 = np.ascontiguousarray(triangles[:, 2] - v0)
+    return v0, e1, e2, chunk_boxes(v0, e1, e2) if len(triangles) >= _CHUNKED_FROM else None
+
+
+def _first_hits_compiled(origins, directions, triangles, offset, prepared=None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_first_hits` through the compiled kernel."""
+    v0, e1, e2, boxes = _prepare(triangles) if prepared is None else prepared
     hit = np.full(len(origins), -1, dtype=np.int64)
     side = np.zeros(len(origins))
-    kernel = first_hits_chunked if len(triangles) >= _CHUNKED_FROM else _first_hits_kernel
-    kernel(np.ascontiguousarray(origins, dtype=np.float64), np.ascontiguousarray(directions, dtype=np.float64),
-           v0, e1, e2, float(offset), hit, side)
+    origins = np.ascontiguousarray(origins, dtype=np.float64)
+    directions = np.ascontiguousarray(directions, dtype=np.float64)
+    if len(v0) >= _CHUNKED_FROM:
+        first_hits_chunked(origins, directions, v0, e1, e2, float(offset), hit, side, boxes)
+    else:
+        _first_hits_kernel(origins, directions, v0, e1, e2, float(offset), hit, side)
     return hit, side
 
 
@@ -205,8 +215,10 @@ def trace_emitters(quads: np.ndarray, normals: np.ndarray, emission: np.ndarray,
     origins, directions, _ = _sample_rays(quads, normals, np.where(power > 0, power, 0.0), rng)
     # Hits nearer than the offset are the ray's own patch (or round-off on a neighbour).
     offset = _OFFSET_REL * max(scale, 1e-300)
-    front_hit, front_side = _first_hits(origins, directions, triangles, offset)
-    probe_hit, probe_side = _first_hits(origins, -directions, triangles, offset)
+    compiled = len(origins) * len(triangles) > _NUMPY_TESTS
+    prepared = _prepare(triangles) if compiled else None  # once for both sides
+    front_hit, front_side = _first_hits(origins, directions, triangles, offset, prepared)
+    probe_hit, probe_side = _first_hits(origins, -directions, triangles, offset, prepared)
     f, b, e, names = _classify(front_hit, front_side, triangle_patch, patch_object, objects)
     pf, pb, pe, _ = _classify(probe_hit, probe_side, triangle_patch, patch_object, objects)
     return LightPaths(N_RAYS, f, b, e, names, pf, pb, pe)

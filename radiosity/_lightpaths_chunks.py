@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["CHUNK", "arrival_side", "first_hits_chunked", "hit_distance"]
+__all__ = ["CHUNK", "arrival_side", "chunk_boxes", "first_hits_chunked", "hit_distance"]
 
 CHUNK = 64
 # Boxes grow by this fraction of the scene's diagonal (and slab distances by this fraction of
@@ -56,16 +56,22 @@ def arrival_side(dx, dy, dz, e1, e2, k):
     return dx * (ay * bz - az * by) + dy * (az * bx - ax * bz) + dz * (ax * by - ay * bx)
 
 
-def first_hits_chunked(origins, directions, v0, e1, e2, offset: float, hit, side) -> None:
+def first_hits_chunked(origins, directions, v0, e1, e2, offset: float, hit, side, boxes=None) -> None:
     """``_lightpaths._first_hits_kernel`` (same arguments, same results), skipping runs of
-    triangles whose box a ray does not reach before its nearest hit so far."""
-    corners = np.stack([v0, v0 + e1, v0 + e2], axis=1)
-    n = len(v0)
-    starts = np.arange(0, n, CHUNK)
-    lo = np.minimum.reduceat(corners.min(axis=1), starts, axis=0)
-    hi = np.maximum.reduceat(corners.max(axis=1), starts, axis=0)
+    triangles whose box a ray does not reach before its nearest hit so far. ``boxes``:
+    :func:`chunk_boxes` of these triangles, if the caller traces them more than once."""
+    lo, hi = chunk_boxes(v0, e1, e2) if boxes is None else boxes
+    _kernel(origins, directions, v0, e1, e2, offset, lo, hi, CHUNK, hit, side)
+
+
+def chunk_boxes(v0, e1, e2) -> tuple[np.ndarray, np.ndarray]:
+    """Padded (lo, hi) boxes of each run of ``CHUNK`` consecutive triangles."""
+    b, c = v0 + e1, v0 + e2
+    starts = np.arange(0, len(v0), CHUNK)
+    lo = np.minimum.reduceat(np.minimum(np.minimum(v0, b), c), starts, axis=0)
+    hi = np.maximum.reduceat(np.maximum(np.maximum(v0, b), c), starts, axis=0)
     pad = _PAD_REL * float(np.linalg.norm(hi.max(axis=0) - lo.min(axis=0))) + 1e-300
-    _kernel(origins, directions, v0, e1, e2, offset, lo - pad, hi + pad, CHUNK, hit, side)
+    return lo - pad, hi + pad
 
 
 @njit(cache=True, inline="always")

@@ -210,7 +210,7 @@ def patch_bound(vertices: np.ndarray, faces: list[np.ndarray], max_patch_size: f
     """
     if not faces:
         return 0
-    sizes = np.fromiter((len(f) for f in faces), dtype=np.int64, count=len(faces))
+    sizes = np.fromiter(map(len, faces), dtype=np.int64, count=len(faces))
     pieces = np.maximum(sizes - 2, 1)
     if max_patch_size is None:
         return int(pieces.sum())

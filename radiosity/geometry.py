@@ -10,7 +10,31 @@ import numpy as np
 
 from . import _tol
 
-__all__ = ["vector_area", "vector_areas", "polygon_normals", "centroids_and_areas", "triangulate", "clip_slots"]
+__all__ = ["vector_area", "vector_areas", "polygon_normals", "centroids_and_areas", "triangulate", "clip_slots",
+           "FaceList", "flat_faces"]
+
+
+class FaceList(list):
+    """Faces, a list of (k,) int arrays, that also holds them end to end: ``flat`` (every corner,
+    face after face) and ``sizes`` (corners per face).
+
+    The OBJ reader makes one, so the stages that work on all faces at once need not concatenate
+    581k small arrays again each (:func:`flat_faces`). Any plain list works as well. Treat it as
+    read-only: an item assigned in place is not seen by ``flat``.
+    """
+
+    def __init__(self, faces, flat: np.ndarray, sizes: np.ndarray):
+        super().__init__(faces)
+        self.flat, self.sizes = flat, sizes
+
+
+def flat_faces(faces: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """(c,) int64 corners of all faces end to end and (f,) int64 corners per face."""
+    if isinstance(faces, FaceList) and len(faces.sizes) == len(faces):
+        return faces.flat, faces.sizes
+    sizes = np.fromiter(map(len, faces), np.int64, len(faces))
+    flat = np.concatenate(faces).astype(np.int64, copy=False) if len(faces) else np.zeros(0, np.int64)
+    return flat, sizes
 
 
 def vector_areas(polys: np.ndarray) -> np.ndarray:

@@ -373,3 +373,20 @@ def test_compiled_first_hits_match_numpy():
     assert (hit >= 0).sum() > 100 and np.array_equal(hit, ref_hit)
     found = hit >= 0
     assert np.array_equal(np.sign(side[found]), np.sign(ref_side[found]))
+
+
+def test_duplicate_pairs_do_not_trust_the_hash(monkeypatch):
+    """Duplicate faces are found by a hash of each corner cycle, then compared as rows: with
+    every hash equal (all collide) the pairs are the same."""
+    import radiosity._checks as checks
+
+    rng = np.random.default_rng(5)
+    vertices = rng.integers(0, 3, (30, 3)).astype(float)
+    faces = [rng.choice(30, int(rng.integers(3, 6)), replace=False) for _ in range(200)]
+    faces += [np.roll(faces[i], int(rng.integers(4))) for i in rng.integers(0, 200, 40)]  # rotated copies
+    faces += [faces[i][::-1].copy() for i in rng.integers(0, 200, 10)]  # opposite windings: kept
+    pairs = checks._duplicate_pairs(vertices, faces, 1e-9)
+    monkeypatch.setattr(checks, "_HASH_A", np.uint64(0))
+    monkeypatch.setattr(checks, "_HASH_B", np.uint64(0))
+    assert checks._duplicate_pairs(vertices, faces, 1e-9) == pairs
+    assert len(pairs) >= 40 and all(later > first for later, first in pairs)

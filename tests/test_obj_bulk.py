@@ -136,3 +136,21 @@ def test_fuzzed_bundled_scenes_read_alike(tmp_path):
         way = check_three_ways(folder / f"{mutant.base}.obj")
         taken[way] = taken.get(way, 0) + 1
     assert taken.get("text", 0) > 0
+
+
+def test_line_bodies_by_runs_match_the_byte_mask(monkeypatch):
+    """``scan_text`` slices v and f bodies per run of lines; the byte mask (every line by itself)
+    gives the same bytes, with comments, indents and other lines between the runs."""
+    import radiosity.io._obj_bulk as bulk
+
+    rng = random.Random(7)
+    pieces = ["v 1 2 3", "v\t1 2 3 4", "f 1 2 3", "f 1/1 2/2 3/3", "  v 1 2 3", "f 1 2 3 # c", "# x", "",
+              "vt 0 0", "o a", "usemtl m", "s 1", "v 1 2 3  ", "\tf 1 2 3", "v 1e5 -2 3"]
+    for _ in range(300):
+        text = "\n".join(rng.choice(pieces) for _ in range(rng.randrange(1, 30))) + "\n"
+        runs = scan_text(text)
+        with monkeypatch.context() as m:
+            m.setattr(bulk, "_MAX_RUNS", 0)  # every file on the mask path
+            mask = scan_text(text)
+        assert runs.v_bytes.tobytes() == mask.v_bytes.tobytes()
+        assert runs.f_bytes.tobytes() == mask.f_bytes.tobytes()
