@@ -92,6 +92,37 @@ def test_block_pairs_are_candidate_pairs_oriented_with_the_same_orders():
     np.testing.assert_array_equal(order, np.where(crossing, 0, ref))
 
 
+@pytest.mark.parametrize("tilt, upper_n, rtol", [(0.0, 8, 1e-5), (0.3, 6, 1e-6), (0.0, 12, 1e-8), (2.0, 7, 1e-4)])
+def test_block_pairs_whole_chunks_give_each_pair_its_own_test_and_orders(tilt, upper_n, rtol):
+    """Plates cut into chunks of _CHUNK patches with one normal: rows take whole chunks by their
+    bounds (_chunk_rule). The pairs, orientations, orders and two-area orders are those of the
+    per-pair tests (candidate_pairs, _pair_setup, the kernel's own two-area choice), and the
+    factors the same bit for bit."""
+    quads = plates(8, tilt=tilt, upper_n=upper_n)
+    normals, centroid, area = geometry(quads)
+    rows = np.arange(len(quads))
+    active = np.ones(len(quads), bool)
+    active[[3, 70]] = False
+    for act in (None, active):
+        rec, src, order, two = block_pairs(quads, normals, centroid, area, rows, act, rtol, two_area_rtol=rtol)
+        i, j = candidate_pairs(quads, normals, centroid, rows)
+        keep = (j > i) if act is None else (j > i) & act[i] & act[j]
+        r2, s2 = reciprocal_pairs(area, i[keep], j[keep])
+        assert sorted(zip(rec.tolist(), src.tolist())) == sorted(zip(r2.tolist(), s2.tolist()))
+        radius = _radius(quads, centroid)
+        crossing, ref = _pair_setup(quads, normals, centroid, radius, centroid, normals, radius, rec, src, rtol)
+        np.testing.assert_array_equal(order, np.where(crossing, 0, ref))
+        sel = order > 0
+        mine = once_factors(quads, normals, centroid, area, rec, src, rtol=rtol, max_points=_tol.PAIR_MAX_POINTS,
+                            order=order, two_area=True, two_order=two)
+        per_pair = once_factors(quads, normals, centroid, area, rec, src, rtol=rtol, max_points=_tol.PAIR_MAX_POINTS,
+                                order=order, two_area=True)
+        np.testing.assert_array_equal(mine, per_pair)
+        assert sel.sum() > 1000
+        if rtol == 1e-5:  # the plates of bench_fill's kind: every pair two-area
+            assert (two[sel] > 0).all()
+
+
 def test_plates_total_reciprocity_and_mirror():
     """Plates cut 6 and 4: each entry is computed once over the smaller patch, A_i F_ij = A_j F_ji
     to rounding, and the total meets Howell C-11."""
