@@ -90,21 +90,18 @@ def block_pairs(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, ar
     chunks = _chunk_bounds(quads, normals, centroid, area, radius, offset, live, _CHUNK)
     # rounding of a dot product of a unit normal with coordinates stays far below this
     margin = 1e-13 * (float(np.abs(quads).max()) + float(np.abs(offset).max()) + 1.0) if n else 0.0
-    # one facing test per pair: each row writes into room for all its partners j > i, then the
-    # rows are packed (a counting pass first cost a second test of every pair)
-    room = np.zeros(len(rows) + 1, np.int64)
-    room[1:] = np.cumsum(np.maximum(n - 1 - rows, 0))
-    counts = np.zeros(len(rows) + 1, np.int64)
-    rec, src, order = np.empty(room[-1], np.int64), np.empty(room[-1], np.int64), np.empty(room[-1], np.int64)
-    two = np.empty(room[-1] if two_area_rtol is not None else 0, np.int64)
-    _list_pairs(quads, normals, centroid, area, offset, radius, rows, live, room, orders, need, need_src, margin,
-                *chunks, rec, src, order, two, counts)
-    starts = np.cumsum(counts)
-    if starts[-1] < room[-1]:
-        packed = [np.empty(starts[-1], np.int64) for _ in range(4 if len(two) else 3)]
-        _pack_rows(room, starts, rec, src, order, two, *packed[:3], packed[3] if len(two) else two)
-        rec, src, order = packed[:3]
-        two = packed[3] if len(two) else two
+    # a counting pass (chunk rules, kept per row and chunk, and the facing test of the pairs of
+    # undecided chunks), then each row writes its pairs in place: no room for all partners j > i
+    # to pack afterwards (that copy cost more than the listing once chunks went whole)
+    rules = np.zeros((len(rows), len(chunks[0]), 4), np.int8)
+    starts = np.zeros(len(rows) + 1, np.int64)
+    _count_pairs(quads, normals, centroid, area, offset, radius, rows, live, orders, need, need_src, margin,
+                 *chunks, rules, starts)
+    np.cumsum(starts, out=starts)
+    rec, src, order = np.empty(starts[-1], np.int64), np.empty(starts[-1], np.int64), np.empty(starts[-1], np.int64)
+    two = np.empty(starts[-1] if two_area_rtol is not None else 0, np.int64)
+    _list_pairs(quads, normals, centroid, area, offset, radius, rows, live, starts, orders, need, need_src, margin,
+                *chunks, rules, rec, src, order, two)
     return (rec, src, order, two) if two_area_rtol is not None else (rec, src, order)
 
 
@@ -417,22 +414,19 @@ def _chunk_rule(quads, normals, centroid, area, offset, radius, i, c, orders, ne
     out[3] = q if q >= 0 else 0
 
 
-def _list_pairs(quads, normals, centroid, area, offset, radius, rows, live, room, orders, need, need_src, margin,
-                uniform, vbox, cbox, ranges, rec, src, order, two, counts):
-    """The pairs {rows[r], j > rows[r]}, both live and facing each other, oriented, with
-    ``quadrature._pair_setup_loop``'s order (0 for receivers crossing the source's plane or
-    rho <= 1.5) and, if ``two`` has room, the two-area order: row r's from ``room[r]`` on,
-    their number in ``counts[r + 1]``. Whole chunks go by :func:`_chunk_rule` where it can."""
+def _count_pairs(quads, normals, centroid, area, offset, radius, rows, live, orders, need, need_src, margin,
+                 uniform, vbox, cbox, ranges, rules, counts):
+    """counts[r + 1]: row rows[r]'s pairs {i, j > i}, live and facing; rules[r, c]: the
+    :func:`_chunk_rule` of each whole chunk c after i (kind 0 where none applies)."""
     n = len(quads)
-    with_two = len(two) > 0
     for s in _prange(len(rows)):
         r = _balanced(s, len(rows))
         i = rows[r]
-        t = room[r]
         counts[r + 1] = 0
         if not live[i]:
             continue
         rule = np.zeros(4, np.int64)
+        k = 0
         j = i + 1
         while j < n:
             c = j // _CHUNK
@@ -440,21 +434,50 @@ def _list_pairs(quads, normals, centroid, area, offset, radius, rows, live, room
             if j == c * _CHUNK and uniform[c]:
                 _chunk_rule(quads, normals, centroid, area, offset, radius, i, c, orders, need, need_src, margin,
                             vbox, cbox, ranges, rule)
-                if rule[0] == 1:
+                for d in range(4):
+                    rules[r, c, d] = rule[d]
+                if rule[0] != 0:
+                    k += stop - j if rule[0] == 2 else 0
                     j = stop
                     continue
-                if rule[0] == 2:
+            for jj in range(j, stop):
+                if live[jj] and _facing(quads, normals, offset, radius, i, jj):
+                    k += 1
+            j = stop
+        counts[r + 1] = k
+
+
+def _list_pairs(quads, normals, centroid, area, offset, radius, rows, live, starts, orders, need, need_src, margin,
+                uniform, vbox, cbox, ranges, rules, rec, src, order, two):
+    """The pairs {rows[r], j > rows[r]}, both live and facing each other, oriented, with
+    ``quadrature._pair_setup_loop``'s order (0 for receivers crossing the source's plane or
+    rho <= 1.5) and, if ``two`` has room, the two-area order: row r's from ``starts[r]`` on.
+    Whole chunks go by the rules :func:`_count_pairs` found, the others pair by pair."""
+    n = len(quads)
+    with_two = len(two) > 0
+    for s in _prange(len(rows)):
+        r = _balanced(s, len(rows))
+        i = rows[r]
+        t = starts[r]
+        if not live[i]:
+            continue
+        j = i + 1
+        while j < n:
+            c = j // _CHUNK
+            stop = min(n, (c + 1) * _CHUNK)
+            if j == c * _CHUNK and uniform[c] and rules[r, c, 0] != 0:
+                if rules[r, c, 0] == 2:
                     for jj in range(j, stop):
-                        if rule[1]:
+                        if rules[r, c, 1]:
                             rec[t], src[t] = jj, i
                         else:
                             rec[t], src[t] = i, jj
-                        order[t] = rule[2]
+                        order[t] = rules[r, c, 2]
                         if with_two:
-                            two[t] = rule[3]
+                            two[t] = rules[r, c, 3]
                         t += 1
-                    j = stop
-                    continue
+                j = stop
+                continue
             for jj in range(j, stop):
                 if not (live[jj] and _facing(quads, normals, offset, radius, i, jj)):
                     continue
@@ -465,19 +488,6 @@ def _list_pairs(quads, normals, centroid, area, offset, radius, rows, live, room
                     two[t] = _two_area_order(quads, normals, centroid, radius, a, b, need_src) if order[t] > 0 else 0
                 t += 1
             j = stop
-        counts[r + 1] = t - room[r]
-
-
-def _pack_rows(room, starts, rec, src, order, two, rec_out, src_out, order_out, two_out):
-    """Row r's listed pairs, from room[r], to starts[r] in the packed arrays."""
-    with_two = len(two_out) > 0
-    for r in _prange(len(room) - 1):
-        for k in range(starts[r + 1] - starts[r]):
-            rec_out[starts[r] + k] = rec[room[r] + k]
-            src_out[starts[r] + k] = src[room[r] + k]
-            order_out[starts[r] + k] = order[room[r] + k]
-            if with_two:
-                two_out[starts[r] + k] = two[room[r] + k]
 
 
 def _apriori_order(quads, normals, centroid, radius, a, b, orders, need):
@@ -886,8 +896,9 @@ _abs_range = _numba.njit(cache=True, inline="always")(_abs_range)
 _order_index = _numba.njit(cache=True, inline="always")(_order_index)
 _rho_order = _numba.njit(cache=True, inline="always", error_model="numpy")(_rho_order)
 _chunk_rule = _numba.njit(cache=True, error_model="numpy")(_chunk_rule)
-_list_pairs = _TwoWays(_list_pairs, lambda *a: len(a[17]), error_model="numpy")
-_pack_rows = _TwoWays(_pack_rows, lambda *a: len(a[2]))
+# the work of both listing passes: the pairs {i, j > i} of their rows
+_count_pairs = _TwoWays(_count_pairs, lambda *a: len(a[6]) * (len(a[0]) - len(a[6]) // 2), error_model="numpy")
+_list_pairs = _TwoWays(_list_pairs, lambda *a: len(a[6]) * (len(a[0]) - len(a[6]) // 2), error_model="numpy")
 _put_points = _numba.njit(cache=True, inline="always", error_model="numpy")(_put_points)
 _copy_points = _numba.njit(cache=True, inline="always")(_copy_points)
 _table_slots = _numba.njit(cache=True)(_table_slots)
