@@ -195,6 +195,34 @@ def test_mirrored_is_the_concatenated_mirror(n, m, seed, drop):
     assert dropped == pytest.approx(float((rv[~keep] * area[ri[~keep]]).sum()), rel=1e-12, abs=1e-300)
 
 
+@pytest.mark.parametrize("drop", [0.0, 0.3])
+def test_parallel_mirror_and_csr_match_the_references(drop):
+    """Above PARALLEL_MIN the mirror runs over spans of pairs and the CSR scatter over ranges of
+    rows, one task each: the same entries in the same order, the same matrix, bit for bit."""
+    rng = np.random.default_rng(5)
+    n, m = 3000, 150_000
+    area = np.where(rng.random(n) < 0.01, 0.0, rng.random(n))
+    i, j = rng.integers(0, n, m), rng.integers(0, n, m)
+    f = np.where(rng.random(m) < 0.2, 0.0, rng.random(m))
+    ratio = np.divide(area[i], area[j], out=np.zeros(m), where=area[j] > 0)
+    ri, rj, rv = np.concatenate([i, j]), np.concatenate([j, i]), np.concatenate([f, f * ratio])
+    keep = rv > drop
+    got_i, got_j, got_v, dropped = mirrored(area, i, j, f, drop)
+    for got, ref in ((got_i, ri[keep]), (got_j, rj[keep]), (got_v, rv[keep])):
+        np.testing.assert_array_equal(got, ref)
+    serial = 0.0
+    for a, v in zip(ri[~keep], rv[~keep]):  # the former serial sum, in entry order
+        serial += v * area[a]
+    assert dropped == serial
+    flat = np.unique(ri * n + rj)  # no repeated (i, j): shuffled distinct entries
+    flat = flat[rng.permutation(len(flat))]
+    ci, cj = flat // n, flat % n
+    cv = rng.normal(size=len(flat))
+    mine, ref = rows_to_csr(ci, cj, cv, n), sp.csr_matrix((cv, (ci, cj)), shape=(n, n))
+    for name in ("indptr", "indices", "data"):
+        np.testing.assert_array_equal(getattr(mine, name), getattr(ref, name))
+
+
 def _facing_random_pairs(m: int, seed: int) -> np.ndarray:
     """(2 m, 4, 3): pairs (2k, 2k + 1) of random parallelograms and triangles (a repeated last
     vertex) facing each other, sizes 0.1..10 and ratios 0.1..10, 1 to 300 sizes apart."""

@@ -125,38 +125,66 @@ def mirrored(area: np.ndarray, i: np.ndarray, j: np.ndarray, f: np.ndarray, drop
     """
     i, j = np.asarray(i, np.int64), np.asarray(j, np.int64)
     f, area = np.asarray(f, float), np.asarray(area, float)
-    kept = _count_kept(area, i, j, f, float(drop))
-    out_i, out_j, out_v = np.empty(kept, np.int64), np.empty(kept, np.int64), np.empty(kept)
-    dropped = _write_mirrored(area, i, j, f, float(drop), out_i, out_j, out_v)
+    # in parallel over fixed spans of _MIRROR_SPAN pairs: each span's kept count, then each
+    # span writes from its offset (the same entries in the same places as one serial pass)
+    spans = (len(i) + _MIRROR_SPAN - 1) // _MIRROR_SPAN
+    kept = np.zeros((2, spans + 1), np.int64)
+    _count_kept(area, i, j, f, float(drop), kept)
+    np.cumsum(kept[0], out=kept[0])
+    np.cumsum(kept[1], out=kept[1])
+    kept[1] += kept[0, -1]
+    total = int(kept[1, -1])
+    out_i, out_j, out_v = np.empty(total, np.int64), np.empty(total, np.int64), np.empty(total)
+    _write_mirrored(area, i, j, f, float(drop), kept, out_i, out_j, out_v)
+    # the dropped mass, serially in entry order (its rounding as before); none on most scenes
+    dropped = _dropped_mass(area, i, j, f, float(drop)) if total < 2 * len(i) else 0.0
     return out_i, out_j, out_v, float(dropped)
+
+
+# Pairs per span of the parallel mirror (its offsets are per span, fixed: results do not depend
+# on the thread count).
+_MIRROR_SPAN = 1 << 15
 
 
 def _mirror_value(area, a, b, fab):
     return fab * (area[a] / area[b]) if area[b] > 0 else 0.0
 
 
-def _count_kept(area, i, j, f, drop):
-    kept = 0
-    for t in range(len(i)):
-        kept += (f[t] > drop) + (_mirror_value(area, i[t], j[t], f[t]) > drop)
-    return kept
+def _count_kept(area, i, j, f, drop, kept):
+    """kept[0, s + 1], kept[1, s + 1]: computed factors and mirrors above ``drop`` in span s."""
+    spans = kept.shape[1] - 1
+    for s in _prange(spans):
+        a, b = 0, 0
+        for t in range(s * _MIRROR_SPAN, min(len(i), (s + 1) * _MIRROR_SPAN)):
+            a += f[t] > drop
+            b += _mirror_value(area, i[t], j[t], f[t]) > drop
+        kept[0, s + 1], kept[1, s + 1] = a, b
 
 
-def _write_mirrored(area, i, j, f, drop, out_i, out_j, out_v):
-    k = 0
+def _write_mirrored(area, i, j, f, drop, kept, out_i, out_j, out_v):
+    """The kept factors, span s's from kept[0, s], their mirrors from kept[1, s]."""
+    spans = kept.shape[1] - 1
+    for s in _prange(spans):
+        k, m = kept[0, s], kept[1, s]
+        for t in range(s * _MIRROR_SPAN, min(len(i), (s + 1) * _MIRROR_SPAN)):
+            if f[t] > drop:
+                out_i[k], out_j[k], out_v[k] = i[t], j[t], f[t]
+                k += 1
+            v = _mirror_value(area, i[t], j[t], f[t])
+            if v > drop:
+                out_i[m], out_j[m], out_v[m] = j[t], i[t], v
+                m += 1
+
+
+def _dropped_mass(area, i, j, f, drop):
+    """Sum of A_receiver F over the left-out factors: the computed ones, then the mirrors."""
     dropped = 0.0
     for t in range(len(i)):
-        if f[t] > drop:
-            out_i[k], out_j[k], out_v[k] = i[t], j[t], f[t]
-            k += 1
-        else:
+        if not f[t] > drop:
             dropped += f[t] * area[i[t]]
     for t in range(len(i)):
         v = _mirror_value(area, i[t], j[t], f[t])
-        if v > drop:
-            out_i[k], out_j[k], out_v[k] = j[t], i[t], v
-            k += 1
-        else:
+        if not v > drop:
             dropped += v * area[j[t]]
     return dropped
 
@@ -187,7 +215,9 @@ def parts_to_csr(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]], n: int)
     _cumulate(indptr)
     fill = indptr[:-1].copy()
     for i, j, v in parts:
-        _place_rows(i, j, v, fill, indices, data)
+        # rows split among the threads, each scanning every entry for its own rows
+        spans = _numba.get_num_threads() if len(i) >= PARALLEL_MIN else 1
+        _place_rows(i, j, v, fill, indices, data, spans)
     if not _sort_rows(indptr, indices, data):
         return None
     F = sp.csr_matrix((data, indices, indptr), shape=(n, n))
@@ -207,12 +237,17 @@ def _cumulate(indptr):
         indptr[r + 1] += indptr[r]
 
 
-def _place_rows(i, j, v, fill, indices, data):
-    """Entries grouped by row, in input order within a row: fill[r] is row r's next free slot."""
-    for t in range(len(i)):
-        r = i[t]
-        indices[fill[r]], data[fill[r]] = j[t], v[t]
-        fill[r] += 1
+def _place_rows(i, j, v, fill, indices, data, spans):
+    """Entries grouped by row, in input order within a row: fill[r] is row r's next free slot.
+    Rows are cut into ``spans`` ranges, one task each (a task writes only its own rows)."""
+    n = len(fill)
+    for s in _prange(spans):
+        lo, hi = s * n // spans, (s + 1) * n // spans
+        for t in range(len(i)):
+            r = i[t]
+            if lo <= r < hi:
+                indices[fill[r]], data[fill[r]] = j[t], v[t]
+                fill[r] += 1
 
 
 def _sort_rows(indptr, indices, data):
@@ -880,10 +915,11 @@ class _TwoWays:
 _task_starts = _numba.njit(cache=True)(_task_starts)
 _count_rows = _numba.njit(cache=True)(_count_rows)
 _cumulate = _numba.njit(cache=True)(_cumulate)
-_place_rows = _numba.njit(cache=True)(_place_rows)
+_place_rows = _TwoWays(_place_rows, lambda *a: len(a[0]) if a[6] > 1 else 0)
 _mirror_value = _numba.njit(cache=True, inline="always")(_mirror_value)
-_count_kept = _numba.njit(cache=True)(_count_kept)
-_write_mirrored = _numba.njit(cache=True)(_write_mirrored)
+_count_kept = _TwoWays(_count_kept, lambda *a: len(a[1]))
+_write_mirrored = _TwoWays(_write_mirrored, lambda *a: len(a[1]))
+_dropped_mass = _numba.njit(cache=True)(_dropped_mass)
 _sort_rows = _TwoWays(_sort_rows, lambda indptr, indices, data: len(indices))
 _balanced = _numba.njit(cache=True, inline="always")(_balanced)
 _in_front = _numba.njit(cache=True, inline="always")(_in_front)
