@@ -560,11 +560,12 @@ def once_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, a
         crossing, order = quadrature._pair_setup(quads, normals, centroid, radius, centroid, normals, radius,
                                                  rec, src, rtol)
         order = np.where(crossing, 0, order)
-    fast = (order > 0) & (order * order <= max_points)
-    if fast.all():  # no gathers for the common case of a scene of separated pairs
+    lo, hi = (int(order.min()), int(order.max())) if len(order) else (1, 1)
+    if lo > 0 and hi * hi <= max_points:  # no gathers for the common case of a scene of separated pairs
         return separated_factors(quads, normals, centroid, area, rec, src, order, _MODES[mode],
                                  raw_below=raw_ratio(rtol), two_area_rtol=rtol if two_area else None,
                                  two_order=two_order if two_area else None)
+    fast = (order > 0) & (order * order <= max_points)
     sel = np.flatnonzero(fast)
     out[sel] = separated_factors(quads, normals, centroid, area, rec[sel], src[sel], order[sel], _MODES[mode],
                                  raw_below=raw_ratio(rtol), two_area_rtol=rtol if two_area else None,
@@ -626,7 +627,7 @@ def separated_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarr
     out = np.empty(m)
     if not m:
         return out
-    grouped = bool(np.all(src[1:] >= src[:-1]))  # the fill's pairs of equal areas come grouped by source
+    grouped = _ascending(np.asarray(src))  # the fill's pairs of equal areas come grouped by source
     has_two = two_area_rtol is not None and two_order is not None
     two = np.asarray(two_order if has_two else np.zeros(0), dtype=np.int64)
     if grouped:
@@ -669,6 +670,14 @@ def two_area_need(rtol: float | None) -> np.ndarray:
         q = np.arange(1, TWO_AREA_MAX_ORDER + 1)
         need[1:] = (quadrature._APRIORI_C * quadrature._APRIORI_SAFETY / rtol) ** (1.0 / (2.0 * q))
     return need
+
+
+def _ascending(x):
+    """Whether x never decreases (one compiled pass, stopping at the first descent)."""
+    for t in range(1, len(x)):
+        if x[t] < x[t - 1]:
+            return False
+    return True
 
 
 def _task_starts(src, order, lanes):
@@ -913,6 +922,7 @@ class _TwoWays:
 
 # The plain functions above are compiled here (the serial and parallel builds of _TwoWays).
 _task_starts = _numba.njit(cache=True)(_task_starts)
+_ascending = _numba.njit(cache=True)(_ascending)
 _count_rows = _numba.njit(cache=True)(_count_rows)
 _cumulate = _numba.njit(cache=True)(_cumulate)
 _place_rows = _TwoWays(_place_rows, lambda *a: len(a[0]) if a[6] > 1 else 0)
