@@ -585,6 +585,28 @@ def _classify_pair(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, nod
     return (2 if n_maybe else 0), n_maybe
 
 
+@njit(cache=True)
+def on_facet_planes(quads, planes, candidates, tol):
+    """(n,) bool: patch p has all its vertices within tol of the plane of some facet
+    ``planes[candidates[p, c]]`` (n . x + d, the hull's equations), summed as n0 x + n1 y + n2 z
+    then + d."""
+    n = quads.shape[0]
+    out = np.zeros(n, np.bool_)
+    for p in range(n):
+        for c in range(candidates.shape[1]):
+            f = candidates[p, c]
+            on = True
+            for k in range(quads.shape[1]):
+                h = planes[f, 0] * quads[p, k, 0] + planes[f, 1] * quads[p, k, 1] + planes[f, 2] * quads[p, k, 2]
+                if not abs(h + planes[f, 3]) <= tol:
+                    on = False
+                    break
+            if on:
+                out[p] = True
+                break
+    return out
+
+
 # Runs of pairs sharing a receiver or a source are first classified as a whole (see
 # _classify_set): up to _GROUP_MAX pairs at once, halved while undecided down to _GROUP_MIN.
 _GROUP_MAX = 32
