@@ -18,6 +18,9 @@ Without ``--view3d`` the baseline is the kernel's own ceiling: the bare raw-sum 
 bench_formfactors (no clipping, no far form, no checks) evaluating one point per pair, i.e. what
 the fill would cost if each pair were a single kernel evaluation and nothing else.
 ``--threads`` also times our open n = 32 case on 1 and 2 threads (``numba.set_num_threads``).
+``--omp-wait-policy`` (default ``PASSIVE``, what the ``radiosity`` command sets for itself, see
+``radiosity._startup``) sets ``OMP_WAIT_POLICY`` before numba starts its threads; ``unset``
+leaves the environment's (a Python program importing radiosity: libgomp's spin-then-sleep).
 Writes ``bench/results/fill.json``.
 
 Building View3D 4.0 from its public source (https://github.com/jasondegraw/View3D), outside this
@@ -188,8 +191,14 @@ def main(argv=None):
         parser.add_argument("--repeats", type=int, default=5)
         parser.add_argument("--sizes", default="8,16,32")
         parser.add_argument("--threads", action="store_true", help="also time 1 vs 2 threads")
+        parser.add_argument("--omp-wait-policy", default="PASSIVE", choices=["PASSIVE", "ACTIVE", "unset"],
+                            help="OMP_WAIT_POLICY for our runs (default: PASSIVE, as the radiosity command)")
 
     args = parse_args(__doc__.splitlines()[0], argv, extra)
+    import os
+
+    if args.omp_wait_policy != "unset":  # before numba's OpenMP pool starts (radiosity is imported below)
+        os.environ["OMP_WAIT_POLICY"] = args.omp_wait_policy
     sizes = [8, 16] if args.quick else [int(s) for s in args.sizes.split(",")]
     repeats = 2 if args.quick else args.repeats
     rows = []
@@ -203,6 +212,7 @@ def main(argv=None):
     if scaling:
         print_table(scaling, ["threads", "best", "seconds", "speedup"], title="Open n = 32, ours on 1 and 2 threads")
     path = write_json("fill", {"exact": EXACT, "ours": OURS, "view3d_eps": VIEW3D_EPS,
+                               "omp_wait_policy": os.environ.get("OMP_WAIT_POLICY", "unset"),
                                "view3d": args.view3d, "rows": rows, "threads": scaling}, args.out)
     print(f"\nwrote {path}")
 

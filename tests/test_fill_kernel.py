@@ -92,6 +92,37 @@ def test_block_pairs_are_candidate_pairs_oriented_with_the_same_orders():
     np.testing.assert_array_equal(order, np.where(crossing, 0, ref))
 
 
+@pytest.mark.parametrize("tilt, upper_n, rtol", [(0.0, 8, 1e-5), (0.3, 6, 1e-6), (0.0, 12, 1e-8), (2.0, 7, 1e-4)])
+def test_block_pairs_whole_chunks_give_each_pair_its_own_test_and_orders(tilt, upper_n, rtol):
+    """Plates cut into chunks of _CHUNK patches with one normal: rows take whole chunks by their
+    bounds (_chunk_rule). The pairs, orientations, orders and two-area orders are those of the
+    per-pair tests (candidate_pairs, _pair_setup, the kernel's own two-area choice), and the
+    factors the same bit for bit."""
+    quads = plates(8, tilt=tilt, upper_n=upper_n)
+    normals, centroid, area = geometry(quads)
+    rows = np.arange(len(quads))
+    active = np.ones(len(quads), bool)
+    active[[3, 70]] = False
+    for act in (None, active):
+        rec, src, order, two = block_pairs(quads, normals, centroid, area, rows, act, rtol, two_area_rtol=rtol)
+        i, j = candidate_pairs(quads, normals, centroid, rows)
+        keep = (j > i) if act is None else (j > i) & act[i] & act[j]
+        r2, s2 = reciprocal_pairs(area, i[keep], j[keep])
+        assert sorted(zip(rec.tolist(), src.tolist())) == sorted(zip(r2.tolist(), s2.tolist()))
+        radius = _radius(quads, centroid)
+        crossing, ref = _pair_setup(quads, normals, centroid, radius, centroid, normals, radius, rec, src, rtol)
+        np.testing.assert_array_equal(order, np.where(crossing, 0, ref))
+        sel = order > 0
+        mine = once_factors(quads, normals, centroid, area, rec, src, rtol=rtol, max_points=_tol.PAIR_MAX_POINTS,
+                            order=order, two_area=True, two_order=two)
+        per_pair = once_factors(quads, normals, centroid, area, rec, src, rtol=rtol, max_points=_tol.PAIR_MAX_POINTS,
+                                order=order, two_area=True)
+        np.testing.assert_array_equal(mine, per_pair)
+        assert sel.sum() > 1000
+        if rtol == 1e-5:  # the plates of bench_fill's kind: every pair two-area
+            assert (two[sel] > 0).all()
+
+
 def test_plates_total_reciprocity_and_mirror():
     """Plates cut 6 and 4: each entry is computed once over the smaller patch, A_i F_ij = A_j F_ji
     to rounding, and the total meets Howell C-11."""
@@ -162,6 +193,34 @@ def test_mirrored_is_the_concatenated_mirror(n, m, seed, drop):
     np.testing.assert_array_equal(got_v, rv[keep])  # bit for bit
     assert got_i.dtype == got_j.dtype == np.int64
     assert dropped == pytest.approx(float((rv[~keep] * area[ri[~keep]]).sum()), rel=1e-12, abs=1e-300)
+
+
+@pytest.mark.parametrize("drop", [0.0, 0.3])
+def test_parallel_mirror_and_csr_match_the_references(drop):
+    """Above PARALLEL_MIN the mirror runs over spans of pairs and the CSR scatter over ranges of
+    rows, one task each: the same entries in the same order, the same matrix, bit for bit."""
+    rng = np.random.default_rng(5)
+    n, m = 3000, 150_000
+    area = np.where(rng.random(n) < 0.01, 0.0, rng.random(n))
+    i, j = rng.integers(0, n, m), rng.integers(0, n, m)
+    f = np.where(rng.random(m) < 0.2, 0.0, rng.random(m))
+    ratio = np.divide(area[i], area[j], out=np.zeros(m), where=area[j] > 0)
+    ri, rj, rv = np.concatenate([i, j]), np.concatenate([j, i]), np.concatenate([f, f * ratio])
+    keep = rv > drop
+    got_i, got_j, got_v, dropped = mirrored(area, i, j, f, drop)
+    for got, ref in ((got_i, ri[keep]), (got_j, rj[keep]), (got_v, rv[keep])):
+        np.testing.assert_array_equal(got, ref)
+    serial = 0.0
+    for a, v in zip(ri[~keep], rv[~keep]):  # the former serial sum, in entry order
+        serial += v * area[a]
+    assert dropped == serial
+    flat = np.unique(ri * n + rj)  # no repeated (i, j): shuffled distinct entries
+    flat = flat[rng.permutation(len(flat))]
+    ci, cj = flat // n, flat % n
+    cv = rng.normal(size=len(flat))
+    mine, ref = rows_to_csr(ci, cj, cv, n), sp.csr_matrix((cv, (ci, cj)), shape=(n, n))
+    for name in ("indptr", "indices", "data"):
+        np.testing.assert_array_equal(getattr(mine, name), getattr(ref, name))
 
 
 def _facing_random_pairs(m: int, seed: int) -> np.ndarray:

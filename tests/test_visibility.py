@@ -141,6 +141,40 @@ def test_fused_classification_matches_numpy_reference():
     np.testing.assert_array_equal(back, status)
 
 
+def test_runs_of_pairs_classified_whole_match_pairs_one_by_one():
+    """Runs of pairs sharing a receiver or a source are classified as a whole first
+    (``_exact_kernel._classify_set``); shuffled, no run forms and every pair is walked alone:
+    the same status and the same occluders (in the same order) for every pair."""
+    quads, groups = boxes_scene()
+    vis = make_vis(quads, groups)
+    i, j = all_pairs(len(quads))
+    perm = np.random.default_rng(3).permutation(len(i))
+    where = np.argsort(perm)  # pair r's position among the shuffled pairs
+    for a, b in ((i, j), (j, i)):  # runs of one receiver, then runs of one source
+        status, rows, occ = vis._classify_pairs(quads, a, quads, b)
+        s2, rows2, occ2 = vis._classify_pairs(quads, a[perm], quads, b[perm])
+        np.testing.assert_array_equal(s2, status[perm])
+        assert list(zip(perm[rows2].tolist(), occ2.tolist())) == \
+            sorted(zip(rows.tolist(), occ.tolist()), key=lambda r: where[r[0]])
+        assert {FREE, FULL, MAYBE} <= set(status.tolist())
+
+
+def test_occluder_mask_kernel_matches_numpy_reference():
+    """The compiled on-facet test of occluder_mask gives the numpy form's mask."""
+    from scipy.spatial import ConvexHull
+
+    from radiosity.visibility._exact_kernel import on_facet_planes
+    from radiosity.visibility._pairs import _nearest_planes, _on_facet_planes_numpy
+
+    quads, _ = boxes_scene()
+    scale = float(np.linalg.norm(np.ptp(quads.reshape(-1, 3), axis=0)))
+    planes = ConvexHull(quads.reshape(-1, 3)).equations
+    cand = _nearest_planes(quads, planes, scale)
+    ref = _on_facet_planes_numpy(quads, planes, cand, 1e-7 * scale)
+    np.testing.assert_array_equal(on_facet_planes(quads, planes, cand.astype(np.int64), 1e-7 * scale), ref)
+    assert 0 < ref.sum() < len(quads)  # floor and ceiling on the hull, the boxes not
+
+
 def test_segment_rays_match_embree_and_the_numpy_reference():
     """Rays tested against each pair's own occluders (float64) = Embree against every patch."""
     quads, groups = boxes_scene()

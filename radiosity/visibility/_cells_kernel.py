@@ -414,7 +414,12 @@ def _pair_hidden(rec, nr, src, sn, occ, t0, t1, opolys, onormal, ocenter, oinwar
         # receiver: small triangles (the grading's) need low orders
         share = 0.5 * tarea / area
         p = 0
-        if rho > 1.0:
+        # a triangle that even the highest order cannot take is split: one pow instead of one
+        # per order (rho well above 1, so the orders' bounds keep their order after rounding;
+        # the same triangles and orders bit for bit)
+        if rho > 1.0 + 1e-6 and share * rho ** (-2.0 * _ORDERS[len(_ORDERS) - 1]) > rtol:
+            pass
+        elif rho > 1.0:
             for q in _ORDERS:
                 if share * rho ** (-2.0 * q) <= rtol:
                     p = q

@@ -53,10 +53,18 @@ def occluder_mask(quads: np.ndarray, scale: float) -> np.ndarray:
     # patch against the facets whose (normal, offset) are nearest its own, with either sign,
     # not against every facet (n x facets distances: 30 GB for a 32,000-face sphere). A match
     # missed this way only keeps a patch as an occluder, which costs time, never accuracy.
+    from ._exact_kernel import on_facet_planes
+
     candidates = _nearest_planes(quads, planes, scale)  # (n, c) facet indices
+    # compiled: the (n, c, 4) distances and their gathers were half the open plates' setup
+    return ~on_facet_planes(np.ascontiguousarray(quads, dtype=np.float64), np.ascontiguousarray(planes),
+                            np.ascontiguousarray(candidates, dtype=np.int64), tol)
+
+
+def _on_facet_planes_numpy(quads: np.ndarray, planes: np.ndarray, candidates: np.ndarray, tol: float) -> np.ndarray:
+    """Reference for ``_exact_kernel.on_facet_planes`` (the former numpy form)."""
     dist = np.einsum("ncd,nkd->nck", planes[candidates, :3], quads) + planes[candidates, 3][..., None]
-    on_facet_plane = (np.abs(dist) <= tol).all(axis=2).any(axis=1)
-    return ~on_facet_plane
+    return (np.abs(dist) <= tol).all(axis=2).any(axis=1)
 
 
 def _nearest_planes(quads: np.ndarray, planes: np.ndarray, scale: float, k: int = 8) -> np.ndarray:

@@ -61,14 +61,22 @@ def reciprocal_pairs(area: np.ndarray, i: np.ndarray, j: np.ndarray) -> tuple[np
 
 
 def block_pairs(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, area: np.ndarray, rows: np.ndarray,
-                active: np.ndarray | None, rtol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                active: np.ndarray | None, rtol: float, *, two_area_rtol: float | None = None):
     """The unordered pairs {i, j > i}, i in ``rows``, that face each other, oriented by
     :func:`reciprocal_pairs`, with their a-priori Gauss order (0: refine adaptively).
 
     One compiled pass for what ``assembly.candidate_pairs`` (then ``j > i``, both active) and
     ``quadrature._pair_setup`` do: the same facing test and the same bound, with the bound's
     powers replaced by the radius ratios where they are met (no ``pow`` per pair), and no
-    (rows, n) mask to scan.
+    (rows, n) mask to scan. A row meets its partners in chunks of ``_CHUNK`` consecutive
+    patches; where bounds over a chunk (its boxes and the ranges of its radii, areas and plane
+    offsets) prove that no pair of the chunk faces, or that every one does with one orientation
+    and one order, the pairs are written without a test each (:func:`_chunk_rule`): the same
+    pairs and orders bit for bit, since the bounds keep margins far above rounding.
+
+    ``two_area_rtol``: also return each pair's two-area source order (:func:`_two_area_order`
+    with :func:`two_area_need` of it, 0 for none or for order-0 pairs; what
+    :func:`separated_factors` would compute per pair) as a fourth array.
     """
     n = len(quads)
     rows = np.asarray(rows, dtype=np.int64)
@@ -78,20 +86,23 @@ def block_pairs(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, ar
     orders = np.array(quadrature._APRIORI_ORDERS, dtype=np.int64)
     # the bound C rho^(-2p) <= rtol / SAFETY  <=>  rho >= (C SAFETY / rtol)^(1 / 2p)
     need = (quadrature._APRIORI_C * quadrature._APRIORI_SAFETY / rtol) ** (1.0 / (2.0 * orders))
-    # one facing test per pair: each row writes into room for all its partners j > i, then the
-    # rows are packed (a counting pass first cost a second test of every pair)
-    room = np.zeros(len(rows) + 1, np.int64)
-    room[1:] = np.cumsum(np.maximum(n - 1 - rows, 0))
-    counts = np.zeros(len(rows) + 1, np.int64)
-    rec, src, order = np.empty(room[-1], np.int64), np.empty(room[-1], np.int64), np.empty(room[-1], np.int64)
-    _list_pairs(quads, normals, centroid, area, offset, radius, rows, live, room, orders, need, rec, src, order,
-                counts)
-    starts = np.cumsum(counts)
-    if starts[-1] == room[-1]:
-        return rec, src, order
-    packed = [np.empty(starts[-1], np.int64) for _ in range(3)]
-    _pack_rows(room, starts, rec, src, order, *packed)
-    return tuple(packed)
+    need_src = two_area_need(two_area_rtol)
+    chunks = _chunk_bounds(quads, normals, centroid, area, radius, offset, live, _CHUNK)
+    # rounding of a dot product of a unit normal with coordinates stays far below this
+    margin = 1e-13 * (float(np.abs(quads).max()) + float(np.abs(offset).max()) + 1.0) if n else 0.0
+    # a counting pass (chunk rules, kept per row and chunk, and the facing test of the pairs of
+    # undecided chunks), then each row writes its pairs in place: no room for all partners j > i
+    # to pack afterwards (that copy cost more than the listing once chunks went whole)
+    rules = np.zeros((len(rows), len(chunks[0]), 4), np.int8)
+    starts = np.zeros(len(rows) + 1, np.int64)
+    _count_pairs(quads, normals, centroid, area, offset, radius, rows, live, orders, need, need_src, margin,
+                 *chunks, rules, starts)
+    np.cumsum(starts, out=starts)
+    rec, src, order = np.empty(starts[-1], np.int64), np.empty(starts[-1], np.int64), np.empty(starts[-1], np.int64)
+    two = np.empty(starts[-1] if two_area_rtol is not None else 0, np.int64)
+    _list_pairs(quads, normals, centroid, area, offset, radius, rows, live, starts, orders, need, need_src, margin,
+                *chunks, rules, rec, src, order, two)
+    return (rec, src, order, two) if two_area_rtol is not None else (rec, src, order)
 
 
 def mirrored(area: np.ndarray, i: np.ndarray, j: np.ndarray, f: np.ndarray, drop: float
@@ -114,38 +125,66 @@ def mirrored(area: np.ndarray, i: np.ndarray, j: np.ndarray, f: np.ndarray, drop
     """
     i, j = np.asarray(i, np.int64), np.asarray(j, np.int64)
     f, area = np.asarray(f, float), np.asarray(area, float)
-    kept = _count_kept(area, i, j, f, float(drop))
-    out_i, out_j, out_v = np.empty(kept, np.int64), np.empty(kept, np.int64), np.empty(kept)
-    dropped = _write_mirrored(area, i, j, f, float(drop), out_i, out_j, out_v)
+    # in parallel over fixed spans of _MIRROR_SPAN pairs: each span's kept count, then each
+    # span writes from its offset (the same entries in the same places as one serial pass)
+    spans = (len(i) + _MIRROR_SPAN - 1) // _MIRROR_SPAN
+    kept = np.zeros((2, spans + 1), np.int64)
+    _count_kept(area, i, j, f, float(drop), kept)
+    np.cumsum(kept[0], out=kept[0])
+    np.cumsum(kept[1], out=kept[1])
+    kept[1] += kept[0, -1]
+    total = int(kept[1, -1])
+    out_i, out_j, out_v = np.empty(total, np.int64), np.empty(total, np.int64), np.empty(total)
+    _write_mirrored(area, i, j, f, float(drop), kept, out_i, out_j, out_v)
+    # the dropped mass, serially in entry order (its rounding as before); none on most scenes
+    dropped = _dropped_mass(area, i, j, f, float(drop)) if total < 2 * len(i) else 0.0
     return out_i, out_j, out_v, float(dropped)
+
+
+# Pairs per span of the parallel mirror (its offsets are per span, fixed: results do not depend
+# on the thread count).
+_MIRROR_SPAN = 1 << 15
 
 
 def _mirror_value(area, a, b, fab):
     return fab * (area[a] / area[b]) if area[b] > 0 else 0.0
 
 
-def _count_kept(area, i, j, f, drop):
-    kept = 0
-    for t in range(len(i)):
-        kept += (f[t] > drop) + (_mirror_value(area, i[t], j[t], f[t]) > drop)
-    return kept
+def _count_kept(area, i, j, f, drop, kept):
+    """kept[0, s + 1], kept[1, s + 1]: computed factors and mirrors above ``drop`` in span s."""
+    spans = kept.shape[1] - 1
+    for s in _prange(spans):
+        a, b = 0, 0
+        for t in range(s * _MIRROR_SPAN, min(len(i), (s + 1) * _MIRROR_SPAN)):
+            a += f[t] > drop
+            b += _mirror_value(area, i[t], j[t], f[t]) > drop
+        kept[0, s + 1], kept[1, s + 1] = a, b
 
 
-def _write_mirrored(area, i, j, f, drop, out_i, out_j, out_v):
-    k = 0
+def _write_mirrored(area, i, j, f, drop, kept, out_i, out_j, out_v):
+    """The kept factors, span s's from kept[0, s], their mirrors from kept[1, s]."""
+    spans = kept.shape[1] - 1
+    for s in _prange(spans):
+        k, m = kept[0, s], kept[1, s]
+        for t in range(s * _MIRROR_SPAN, min(len(i), (s + 1) * _MIRROR_SPAN)):
+            if f[t] > drop:
+                out_i[k], out_j[k], out_v[k] = i[t], j[t], f[t]
+                k += 1
+            v = _mirror_value(area, i[t], j[t], f[t])
+            if v > drop:
+                out_i[m], out_j[m], out_v[m] = j[t], i[t], v
+                m += 1
+
+
+def _dropped_mass(area, i, j, f, drop):
+    """Sum of A_receiver F over the left-out factors: the computed ones, then the mirrors."""
     dropped = 0.0
     for t in range(len(i)):
-        if f[t] > drop:
-            out_i[k], out_j[k], out_v[k] = i[t], j[t], f[t]
-            k += 1
-        else:
+        if not f[t] > drop:
             dropped += f[t] * area[i[t]]
     for t in range(len(i)):
         v = _mirror_value(area, i[t], j[t], f[t])
-        if v > drop:
-            out_i[k], out_j[k], out_v[k] = j[t], i[t], v
-            k += 1
-        else:
+        if not v > drop:
             dropped += v * area[j[t]]
     return dropped
 
@@ -176,7 +215,9 @@ def parts_to_csr(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]], n: int)
     _cumulate(indptr)
     fill = indptr[:-1].copy()
     for i, j, v in parts:
-        _place_rows(i, j, v, fill, indices, data)
+        # rows split among the threads, each scanning every entry for its own rows
+        spans = _numba.get_num_threads() if len(i) >= PARALLEL_MIN else 1
+        _place_rows(i, j, v, fill, indices, data, spans)
     if not _sort_rows(indptr, indices, data):
         return None
     F = sp.csr_matrix((data, indices, indptr), shape=(n, n))
@@ -196,12 +237,17 @@ def _cumulate(indptr):
         indptr[r + 1] += indptr[r]
 
 
-def _place_rows(i, j, v, fill, indices, data):
-    """Entries grouped by row, in input order within a row: fill[r] is row r's next free slot."""
-    for t in range(len(i)):
-        r = i[t]
-        indices[fill[r]], data[fill[r]] = j[t], v[t]
-        fill[r] += 1
+def _place_rows(i, j, v, fill, indices, data, spans):
+    """Entries grouped by row, in input order within a row: fill[r] is row r's next free slot.
+    Rows are cut into ``spans`` ranges, one task each (a task writes only its own rows)."""
+    n = len(fill)
+    for s in _prange(spans):
+        lo, hi = s * n // spans, (s + 1) * n // spans
+        for t in range(len(i)):
+            r = i[t]
+            if lo <= r < hi:
+                indices[fill[r]], data[fill[r]] = j[t], v[t]
+                fill[r] += 1
 
 
 def _sort_rows(indptr, indices, data):
@@ -249,35 +295,234 @@ def _balanced(t, n):
     return t // 2 if t % 2 == 0 else n - 1 - t // 2
 
 
-def _list_pairs(quads, normals, centroid, area, offset, radius, rows, live, room, orders, need, rec, src, order,
-                counts):
-    """The pairs {rows[r], j > rows[r]}, both live and facing each other, oriented, with
-    ``quadrature._pair_setup_loop``'s order (0 for receivers crossing the source's plane or
-    rho <= 1.5): row r's from ``room[r]`` on, their number in ``counts[r + 1]``."""
+# Partners per chunk of the pair listing's bounds (see block_pairs).
+_CHUNK = 32
+
+
+def _chunk_bounds(quads, normals, centroid, area, radius, offset, live, size):
+    """Per chunk of ``size`` consecutive patches: whether all are live with one normal (bit for
+    bit), their vertex box, centroid box, and the ranges of radius, area and plane offset."""
+    n = quads.shape[0]
+    m = (n + size - 1) // size
+    uniform = np.zeros(m, np.bool_)
+    vbox, cbox = np.empty((m, 2, 3)), np.empty((m, 2, 3))
+    ranges = np.empty((m, 3, 2))  # radius, area, offset: (min, max)
+    for c in range(m):
+        lo, hi = c * size, min(n, (c + 1) * size)
+        ok = True
+        for d in range(3):
+            vbox[c, 0, d], vbox[c, 1, d] = np.inf, -np.inf
+            cbox[c, 0, d], cbox[c, 1, d] = np.inf, -np.inf
+        for k in range(3):
+            ranges[c, k, 0], ranges[c, k, 1] = np.inf, -np.inf
+        for j in range(lo, hi):
+            ok = ok and live[j] and normals[j, 0] == normals[lo, 0] and normals[j, 1] == normals[lo, 1] \
+                and normals[j, 2] == normals[lo, 2]
+            for d in range(3):
+                for v in range(quads.shape[1]):
+                    vbox[c, 0, d] = min(vbox[c, 0, d], quads[j, v, d])
+                    vbox[c, 1, d] = max(vbox[c, 1, d], quads[j, v, d])
+                cbox[c, 0, d] = min(cbox[c, 0, d], centroid[j, d])
+                cbox[c, 1, d] = max(cbox[c, 1, d], centroid[j, d])
+            ranges[c, 0, 0], ranges[c, 0, 1] = min(ranges[c, 0, 0], radius[j]), max(ranges[c, 0, 1], radius[j])
+            ranges[c, 1, 0], ranges[c, 1, 1] = min(ranges[c, 1, 0], area[j]), max(ranges[c, 1, 1], area[j])
+            ranges[c, 2, 0], ranges[c, 2, 1] = min(ranges[c, 2, 0], offset[j]), max(ranges[c, 2, 1], offset[j])
+        uniform[c] = ok
+    return uniform, vbox, cbox, ranges
+
+
+def _box_dot(nx, ny, nz, box):
+    """(min, max) of n . x over the box (2, 3)."""
+    lo = (nx * (box[0, 0] if nx >= 0 else box[1, 0]) + ny * (box[0, 1] if ny >= 0 else box[1, 1])
+          + nz * (box[0, 2] if nz >= 0 else box[1, 2]))
+    hi = (nx * (box[1, 0] if nx >= 0 else box[0, 0]) + ny * (box[1, 1] if ny >= 0 else box[0, 1])
+          + nz * (box[1, 2] if nz >= 0 else box[0, 2]))
+    return lo, hi
+
+
+def _vertex_dots(quads, i, nx, ny, nz):
+    """(min, max) of n . v over patch i's vertices."""
+    lo, hi = np.inf, -np.inf
+    for v in range(quads.shape[1]):
+        h = nx * quads[i, v, 0] + ny * quads[i, v, 1] + nz * quads[i, v, 2]
+        lo, hi = min(lo, h), max(hi, h)
+    return lo, hi
+
+
+def _abs_range(lo, hi):
+    """(min, max) of |x| over x in [lo, hi]."""
+    if lo >= 0.0:
+        return lo, hi
+    if hi <= 0.0:
+        return -hi, -lo
+    return 0.0, max(-lo, hi)
+
+
+def _order_index(rho, need, first):
+    """The index q >= first of the order a pair of this rho (not crossing) takes, -1 for none:
+    :func:`_apriori_order`'s choice (first 0, ``need`` over _APRIORI_ORDERS) or
+    :func:`_two_area_order`'s (first 1, ``need`` from two_area_need)."""
+    if not rho > 1.5:
+        return -1
+    for q in range(first, len(need)):
+        if rho >= need[q]:
+            return q
+    return -1
+
+
+def _rho_order(d_lo, d_hi, cos_lo, cos_hi, rr_lo, rr_hi, rs_lo, rs_hi, need, first):
+    """:func:`_order_index` of every pair with centroid distance in [d_lo, d_hi],
+    min(|n_rec . d|, |n_src . d|) in [cos_lo, cos_hi], receiver radius in [rr_lo, rr_hi] and
+    source radius in [rs_lo, rs_hi], or -2 if the ranges allow two. rho = (1 - r_src / dist)
+    min(|n_rec . d|, |n_src . d|) / r_rec, :func:`_pair_rho`'s; the 1e-9 relative margin is
+    far above its rounding."""
+    if not (d_lo > rs_hi and rr_lo > _TINY):
+        return -2
+    lo = (1.0 - rs_hi / d_lo) * cos_lo / rr_hi * (1.0 - 1e-9)
+    hi = (1.0 - rs_lo / d_hi) * cos_hi / rr_lo * (1.0 + 1e-9)
+    a = _order_index(lo, need, first)
+    return a if a == _order_index(hi, need, first) else -2
+
+
+def _chunk_rule(quads, normals, centroid, area, offset, radius, i, c, orders, need, need_src, margin, vbox, cbox,
+                ranges, out):
+    """For row i and the whole chunk c (all live, one normal): out = (kind, swap, order, two).
+    kind 0: no proof (test each pair); 1: no pair faces; 2: every pair faces, receiver j if
+    swap else i, with these orders (order as :func:`_apriori_order`, two as
+    :func:`_two_area_order`)."""
+    out[0] = 0
+    lo0 = c * _CHUNK
+    mx, my, mz = normals[lo0, 0], normals[lo0, 1], normals[lo0, 2]  # the chunk's normal
+    nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
+    r_lo, r_hi = ranges[c, 0, 0], ranges[c, 0, 1]
+    # facing (_facing): a vertex of j in front of i's plane, and one of i in front of j's
+    fj_lo, fj_hi = _box_dot(nx, ny, nz, vbox[c])
+    fi_lo, fi_hi = _vertex_dots(quads, i, mx, my, mz)
+    tol_lo, tol_hi = 1e-9 * (radius[i] + r_lo), 1e-9 * (radius[i] + r_hi)
+    if fj_hi - offset[i] <= tol_lo - 2.0 * margin or fi_hi - ranges[c, 2, 1] <= tol_lo - 2.0 * margin:
+        out[0] = 1  # one of the two tests fails for every pair of the chunk
+        return
+    if not (fj_lo - offset[i] > tol_hi + 2.0 * margin and fi_hi - ranges[c, 2, 1] > tol_hi + 2.0 * margin):
+        return
+    # orientation: the smaller patch receives (j on ties)
+    if ranges[c, 1, 1] <= area[i]:
+        swap = True
+    elif ranges[c, 1, 0] > area[i]:
+        swap = False
+    else:
+        return
+    # neither end crosses the other's plane: all of j in front of i's plane, all of i in front of j's
+    if not (fj_lo - offset[i] > 2.0 * margin and fi_lo - ranges[c, 2, 1] > 2.0 * margin):
+        return
+    # centroid distances, and |n . d| for both normals
+    dlo2, dhi2 = 0.0, 0.0
+    for d in range(3):
+        a, b = cbox[c, 0, d] - centroid[i, d], cbox[c, 1, d] - centroid[i, d]
+        near = 0.0 if a <= 0.0 <= b else min(abs(a), abs(b))
+        far = max(abs(a), abs(b))
+        dlo2 += near * near
+        dhi2 += far * far
+    d_lo, d_hi = np.sqrt(dlo2) * (1.0 - 1e-12), np.sqrt(dhi2) * (1.0 + 1e-12)
+    ci = nx * centroid[i, 0] + ny * centroid[i, 1] + nz * centroid[i, 2]
+    p_lo, p_hi = _box_dot(nx, ny, nz, cbox[c])
+    a_lo, a_hi = _abs_range(p_lo - ci - 2.0 * margin, p_hi - ci + 2.0 * margin)
+    cj = mx * centroid[i, 0] + my * centroid[i, 1] + mz * centroid[i, 2]
+    b_lo, b_hi = _abs_range(ranges[c, 2, 0] - cj - 2.0 * margin, ranges[c, 2, 1] - cj + 2.0 * margin)
+    cos_lo, cos_hi = min(a_lo, b_lo), min(a_hi, b_hi)
+    ri = radius[i]
+    if swap:  # receiver j (radius in [r_lo, r_hi]), source i
+        p = _rho_order(d_lo, d_hi, cos_lo, cos_hi, r_lo, r_hi, ri, ri, need, 0)
+    else:
+        p = _rho_order(d_lo, d_hi, cos_lo, cos_hi, ri, ri, r_lo, r_hi, need, 0)
+    if p == -2:
+        return
+    q = -1
+    if p >= 0 and len(need_src) > 1:  # the roles swapped (order-0 pairs get no two-area order)
+        if swap:
+            q = _rho_order(d_lo, d_hi, cos_lo, cos_hi, ri, ri, r_lo, r_hi, need_src, 1)
+        else:
+            q = _rho_order(d_lo, d_hi, cos_lo, cos_hi, r_lo, r_hi, ri, ri, need_src, 1)
+        if q == -2:
+            return
+    out[0], out[1] = 2, swap
+    out[2] = orders[p] if p >= 0 else 0
+    out[3] = q if q >= 0 else 0
+
+
+def _count_pairs(quads, normals, centroid, area, offset, radius, rows, live, orders, need, need_src, margin,
+                 uniform, vbox, cbox, ranges, rules, counts):
+    """counts[r + 1]: row rows[r]'s pairs {i, j > i}, live and facing; rules[r, c]: the
+    :func:`_chunk_rule` of each whole chunk c after i (kind 0 where none applies)."""
+    n = len(quads)
     for s in _prange(len(rows)):
         r = _balanced(s, len(rows))
         i = rows[r]
-        t = room[r]
         counts[r + 1] = 0
         if not live[i]:
             continue
-        for j in range(i + 1, len(quads)):
-            if not (live[j] and _facing(quads, normals, offset, radius, i, j)):
+        rule = np.zeros(4, np.int64)
+        k = 0
+        j = i + 1
+        while j < n:
+            c = j // _CHUNK
+            stop = min(n, (c + 1) * _CHUNK)
+            if j == c * _CHUNK and uniform[c]:
+                _chunk_rule(quads, normals, centroid, area, offset, radius, i, c, orders, need, need_src, margin,
+                            vbox, cbox, ranges, rule)
+                for d in range(4):
+                    rules[r, c, d] = rule[d]
+                if rule[0] != 0:
+                    k += stop - j if rule[0] == 2 else 0
+                    j = stop
+                    continue
+            for jj in range(j, stop):
+                if live[jj] and _facing(quads, normals, offset, radius, i, jj):
+                    k += 1
+            j = stop
+        counts[r + 1] = k
+
+
+def _list_pairs(quads, normals, centroid, area, offset, radius, rows, live, starts, orders, need, need_src, margin,
+                uniform, vbox, cbox, ranges, rules, rec, src, order, two):
+    """The pairs {rows[r], j > rows[r]}, both live and facing each other, oriented, with
+    ``quadrature._pair_setup_loop``'s order (0 for receivers crossing the source's plane or
+    rho <= 1.5) and, if ``two`` has room, the two-area order: row r's from ``starts[r]`` on.
+    Whole chunks go by the rules :func:`_count_pairs` found, the others pair by pair."""
+    n = len(quads)
+    with_two = len(two) > 0
+    for s in _prange(len(rows)):
+        r = _balanced(s, len(rows))
+        i = rows[r]
+        t = starts[r]
+        if not live[i]:
+            continue
+        j = i + 1
+        while j < n:
+            c = j // _CHUNK
+            stop = min(n, (c + 1) * _CHUNK)
+            if j == c * _CHUNK and uniform[c] and rules[r, c, 0] != 0:
+                if rules[r, c, 0] == 2:
+                    for jj in range(j, stop):
+                        if rules[r, c, 1]:
+                            rec[t], src[t] = jj, i
+                        else:
+                            rec[t], src[t] = i, jj
+                        order[t] = rules[r, c, 2]
+                        if with_two:
+                            two[t] = rules[r, c, 3]
+                        t += 1
+                j = stop
                 continue
-            a, b = (j, i) if area[j] <= area[i] else (i, j)
-            rec[t], src[t] = a, b
-            order[t] = _apriori_order(quads, normals, centroid, radius, a, b, orders, need)
-            t += 1
-        counts[r + 1] = t - room[r]
-
-
-def _pack_rows(room, starts, rec, src, order, rec_out, src_out, order_out):
-    """Row r's listed pairs, from room[r], to starts[r] in the packed arrays."""
-    for r in _prange(len(room) - 1):
-        for k in range(starts[r + 1] - starts[r]):
-            rec_out[starts[r] + k] = rec[room[r] + k]
-            src_out[starts[r] + k] = src[room[r] + k]
-            order_out[starts[r] + k] = order[room[r] + k]
+            for jj in range(j, stop):
+                if not (live[jj] and _facing(quads, normals, offset, radius, i, jj)):
+                    continue
+                a, b = (jj, i) if area[jj] <= area[i] else (i, jj)
+                rec[t], src[t] = a, b
+                order[t] = _apriori_order(quads, normals, centroid, radius, a, b, orders, need)
+                if with_two:
+                    two[t] = _two_area_order(quads, normals, centroid, radius, a, b, need_src) if order[t] > 0 else 0
+                t += 1
+            j = stop
 
 
 def _apriori_order(quads, normals, centroid, radius, a, b, orders, need):
@@ -293,12 +538,14 @@ def _apriori_order(quads, normals, centroid, radius, a, b, orders, need):
 
 def once_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, area: np.ndarray,
                  rec: np.ndarray, src: np.ndarray, *, rtol: float, max_points: int, mode: str = "fill",
-                 order: np.ndarray | None = None, two_area: bool = False) -> np.ndarray:
+                 order: np.ndarray | None = None, two_area: bool = False,
+                 two_order: np.ndarray | None = None) -> np.ndarray:
     """Unoccluded F(rec -> src), each pair to ``rtol``: :func:`radiosity.formfactors._quadrature.pair_factors`'s
     rules, its separated pairs by :func:`separated_factors`, the others (near, touching, crossing
     the source's plane) by ``pair_factors`` itself. ``two_area``: separated pairs whose source
     is small enough take the Gauss rule on the source too (:func:`two_area_need`), within the
-    same rtol but not the same numbers."""
+    same rtol but not the same numbers. ``two_order``: their two-area orders as
+    ``block_pairs(..., two_area_rtol=rtol)`` lists them (else computed per pair)."""
     from ...formfactors._closed_form import _MODES
 
     if not (1e-12 <= rtol < 1):
@@ -313,13 +560,16 @@ def once_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, a
         crossing, order = quadrature._pair_setup(quads, normals, centroid, radius, centroid, normals, radius,
                                                  rec, src, rtol)
         order = np.where(crossing, 0, order)
-    fast = (order > 0) & (order * order <= max_points)
-    if fast.all():  # no gathers for the common case of a scene of separated pairs
+    lo, hi = (int(order.min()), int(order.max())) if len(order) else (1, 1)
+    if lo > 0 and hi * hi <= max_points:  # no gathers for the common case of a scene of separated pairs
         return separated_factors(quads, normals, centroid, area, rec, src, order, _MODES[mode],
-                                 raw_below=raw_ratio(rtol), two_area_rtol=rtol if two_area else None)
+                                 raw_below=raw_ratio(rtol), two_area_rtol=rtol if two_area else None,
+                                 two_order=two_order if two_area else None)
+    fast = (order > 0) & (order * order <= max_points)
     sel = np.flatnonzero(fast)
     out[sel] = separated_factors(quads, normals, centroid, area, rec[sel], src[sel], order[sel], _MODES[mode],
-                                 raw_below=raw_ratio(rtol), two_area_rtol=rtol if two_area else None)
+                                 raw_below=raw_ratio(rtol), two_area_rtol=rtol if two_area else None,
+                                 two_order=two_order[sel] if two_area and two_order is not None else None)
     rest = np.flatnonzero(~fast)
     if len(rest):
         out[rest] = quadrature.pair_factors(quads, normals, centroid, area, rec[rest], src[rest], rtol=rtol,
@@ -340,7 +590,8 @@ def raw_ratio(rtol: float) -> float:
 
 def separated_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, area: np.ndarray,
                       rec: np.ndarray, src: np.ndarray, order: np.ndarray, mode: int, *,
-                      raw_below: float = 0.0, two_area_rtol: float | None = None) -> np.ndarray:
+                      raw_below: float = 0.0, two_area_rtol: float | None = None,
+                      two_order: np.ndarray | None = None) -> np.ndarray:
     """F(rec -> src) by the receiver's order-p Gauss rule (the centroid for p = 1), p = ``order``.
 
     The same rule as :func:`radiosity.formfactors._quadrature.pair_factors` for its separated pairs
@@ -363,6 +614,9 @@ def separated_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarr
         If given, pairs whose source meets the a-priori bound at this rtol with an order-q rule,
         q <= ``TWO_AREA_MAX_ORDER``, take that Gauss rule on the source as well (the two-area
         rule of :func:`two_area_need`) instead of Lambert's closed form.
+    two_order : (m,) int, optional
+        With ``two_area_rtol``: each pair's source order q (0: Lambert), as
+        ``block_pairs(..., two_area_rtol=...)`` lists them; computed per pair if not given.
 
     Returns
     -------
@@ -373,13 +627,17 @@ def separated_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarr
     out = np.empty(m)
     if not m:
         return out
-    grouped = bool(np.all(src[1:] >= src[:-1]))  # the fill's pairs of equal areas come grouped by source
+    grouped = _ascending(np.asarray(src))  # the fill's pairs of equal areas come grouped by source
+    has_two = two_area_rtol is not None and two_order is not None
+    two = np.asarray(two_order if has_two else np.zeros(0), dtype=np.int64)
     if grouped:
         rec_s, src_s, order_s = (np.ascontiguousarray(x, dtype=np.int64) for x in (rec, src, order))
+        two_s = np.ascontiguousarray(two)
     else:
         by_source = np.argsort(src, kind="stable")
         rec_s, src_s = rec[by_source].astype(np.int64), src[by_source].astype(np.int64)
         order_s = order[by_source].astype(np.int64)
+        two_s = two[by_source] if has_two else two
     starts = _task_starts(src_s, order_s, _TASK_LANES)
     nodes, weights = _gauss_tables()
     sorted_out = out if grouped else np.empty(m)
@@ -389,8 +647,8 @@ def separated_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarr
     TP, TN, TW = np.empty((3, total)), np.empty((3, total)), np.empty(total)
     _point_table(quads, normals, centroid, area, nodes, weights, slot, TP, TN, TW)
     _separated_kernel(quads, normals, centroid, area, quadrature._radius(quads, centroid), rec_s, src_s, order_s,
-                      starts, nodes, weights, mode, float(raw_below), two_area_need(two_area_rtol), slot, TP, TN, TW,
-                      sorted_out)
+                      starts, nodes, weights, mode, float(raw_below), two_area_need(two_area_rtol), has_two, two_s,
+                      slot, TP, TN, TW, sorted_out)
     if not grouped:
         out[by_source] = sorted_out
     return out
@@ -412,6 +670,14 @@ def two_area_need(rtol: float | None) -> np.ndarray:
         q = np.arange(1, TWO_AREA_MAX_ORDER + 1)
         need[1:] = (quadrature._APRIORI_C * quadrature._APRIORI_SAFETY / rtol) ** (1.0 / (2.0 * q))
     return need
+
+
+def _ascending(x):
+    """Whether x never decreases (one compiled pass, stopping at the first descent)."""
+    for t in range(1, len(x)):
+        if x[t] < x[t - 1]:
+            return False
+    return True
 
 
 def _task_starts(src, order, lanes):
@@ -565,12 +831,13 @@ def _two_area_in_table(quads, normals, centroid, area, rec, src, order, t0, t1, 
 
 
 def _separated_kernel(quads, normals, centroid, area, radius, rec, src, order, starts, nodes, weights, mode,
-                      raw_below, need_src, slot, TP, TN, TW, out):
+                      raw_below, need_src, has_two, two, slot, TP, TN, TW, out):
     """out[t] = F(rec[t] -> src[t]) for pairs sorted by source, one task per run in ``starts``.
 
     Pairs whose source has a two-area order (:func:`_two_area_order`; none if ``need_src`` has
     one entry) take the Gauss rule on the source too, at the run's largest such order; the
-    others Lambert's closed form. Their lanes come after the Lambert lanes."""
+    others Lambert's closed form. Their lanes come after the Lambert lanes. ``has_two``: the
+    orders are given in ``two`` (the pair listing's, the same numbers)."""
     k = quads.shape[1]
     max_q = len(need_src) - 1
     for task in _prange(len(starts) - 1):
@@ -581,7 +848,10 @@ def _separated_kernel(quads, normals, centroid, area, radius, rec, src, order, s
         qs = np.zeros(t1 - t0, np.int64)
         for t in range(t0, t1):
             a = rec[t]
-            q = _two_area_order(quads, normals, centroid, radius, a, b, need_src) if max_q > 0 else 0
+            if has_two:
+                q = two[t]
+            else:
+                q = _two_area_order(quads, normals, centroid, radius, a, b, need_src) if max_q > 0 else 0
             qs[t - t0] = q
             if q > 0:
                 n_two += order[t] * order[t]
@@ -652,19 +922,29 @@ class _TwoWays:
 
 # The plain functions above are compiled here (the serial and parallel builds of _TwoWays).
 _task_starts = _numba.njit(cache=True)(_task_starts)
+_ascending = _numba.njit(cache=True)(_ascending)
 _count_rows = _numba.njit(cache=True)(_count_rows)
 _cumulate = _numba.njit(cache=True)(_cumulate)
-_place_rows = _numba.njit(cache=True)(_place_rows)
+_place_rows = _TwoWays(_place_rows, lambda *a: len(a[0]) if a[6] > 1 else 0)
 _mirror_value = _numba.njit(cache=True, inline="always")(_mirror_value)
-_count_kept = _numba.njit(cache=True)(_count_kept)
-_write_mirrored = _numba.njit(cache=True)(_write_mirrored)
+_count_kept = _TwoWays(_count_kept, lambda *a: len(a[1]))
+_write_mirrored = _TwoWays(_write_mirrored, lambda *a: len(a[1]))
+_dropped_mass = _numba.njit(cache=True)(_dropped_mass)
 _sort_rows = _TwoWays(_sort_rows, lambda indptr, indices, data: len(indices))
 _balanced = _numba.njit(cache=True, inline="always")(_balanced)
 _in_front = _numba.njit(cache=True, inline="always")(_in_front)
 _facing = _numba.njit(cache=True, inline="always")(_facing)
 _apriori_order = _numba.njit(cache=True, inline="always", error_model="numpy")(_apriori_order)
-_list_pairs = _TwoWays(_list_pairs, lambda *a: len(a[11]), error_model="numpy")
-_pack_rows = _TwoWays(_pack_rows, lambda *a: len(a[2]))
+_chunk_bounds = _numba.njit(cache=True)(_chunk_bounds)
+_box_dot = _numba.njit(cache=True, inline="always")(_box_dot)
+_vertex_dots = _numba.njit(cache=True, inline="always")(_vertex_dots)
+_abs_range = _numba.njit(cache=True, inline="always")(_abs_range)
+_order_index = _numba.njit(cache=True, inline="always")(_order_index)
+_rho_order = _numba.njit(cache=True, inline="always", error_model="numpy")(_rho_order)
+_chunk_rule = _numba.njit(cache=True, error_model="numpy")(_chunk_rule)
+# the work of both listing passes: the pairs {i, j > i} of their rows
+_count_pairs = _TwoWays(_count_pairs, lambda *a: len(a[6]) * (len(a[0]) - len(a[6]) // 2), error_model="numpy")
+_list_pairs = _TwoWays(_list_pairs, lambda *a: len(a[6]) * (len(a[0]) - len(a[6]) // 2), error_model="numpy")
 _put_points = _numba.njit(cache=True, inline="always", error_model="numpy")(_put_points)
 _copy_points = _numba.njit(cache=True, inline="always")(_copy_points)
 _table_slots = _numba.njit(cache=True)(_table_slots)

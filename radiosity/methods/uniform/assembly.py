@@ -259,13 +259,14 @@ def fill_block(quads, normals, centroid, area, visibility, settings: FillSetting
     if active is not None:
         rows = rows[active[rows]]
     # each unordered pair once, the smaller patch receiving; its mirror by reciprocity (below)
-    i, j, order = block_pairs(quads, normals, centroid, area, rows, active, settings.formfactor_rtol)
+    i, j, order, two = block_pairs(quads, normals, centroid, area, rows, active, settings.formfactor_rtol,
+                                   two_area_rtol=settings.formfactor_rtol)
     if not len(i):
         empty = np.zeros(0, np.int64)
         return empty, empty, np.zeros(0), stats
     t0 = time.perf_counter()
     f = once_factors(quads, normals, centroid, area, i, j, rtol=settings.formfactor_rtol,
-                     max_points=_tol.PAIR_MAX_POINTS, order=order, two_area=True)
+                     max_points=_tol.PAIR_MAX_POINTS, order=order, two_area=True, two_order=two)
     t1 = time.perf_counter()
     stats.seconds_formfactors += t1 - t0
     if visibility is not None:
