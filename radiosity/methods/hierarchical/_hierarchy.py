@@ -54,6 +54,8 @@ CHUNK_LINKS = 100_000  # links evaluated at once (bounds the temporaries of the 
 # +0.46% to -0.34% mean (+8.0% to +5.2% worst) at 3.6x the time; a sphere (nothing occludes)
 # pays nothing.
 CLUSTER_VISIBILITY = True
+CLUSTER_EPS_SHARE = 0.3  # cluster links meet this share of the element links' eps
+CLUSTER_VISIBILITY_PAIRS = 1  # representative patches per node: their k^2 pairs' mean visibility
 # Receiver points per direction of the exact shadows of partly visible links at the minimum size
 # (see Hierarchy._settle).
 SETTLE_ORDER = 3
@@ -63,6 +65,7 @@ SETTLE_EXACT_ALWAYS = True
 # range only), "near" (the sphere bound where the source is closer than the receiver's radius),
 # "always".
 NEAR_BOUND = "near"
+NEAR_SMALLER = 0.5  # ... and the source's radius is below this share of r's
 NEAR_RELATIVE = 2.0  # "near": the source's sphere comes closer to r's centroid than this many r radii
 SETTLE_LATER = True
 # Share of an undecided link's factor left in doubt when all its rays agree (see _visibility_doubt).
@@ -332,17 +335,43 @@ class Hierarchy:
         over = (tree.bound(r, s, B) > self.eps) | (r == s)
         factor = self.cluster_factor[~over] if len(self.cluster_factor) == len(r) else np.zeros(0)
         cr, cs, pr, ps, n_split = tree.refine(r[over], s[over], B, self.eps)
+        visible, partial = self._cluster_visibility(cr, cs)
+        if CLUSTER_EPS_SHARE < 1.0 and len(cr):
+            # a link whose representative pair is partly visible meets a share of eps: its
+            # visibility is a guess, and the guesses of many links add up on one leaf
+            tight = partial & (tree.bound(cr, cs, B) > CLUSTER_EPS_SHARE * self.eps)
+            if tight.any():
+                tr, ts, tpr, tps, t_split = tree.refine(cr[tight], cs[tight], B, CLUSTER_EPS_SHARE * self.eps)
+                t_visible, _ = self._cluster_visibility(tr, ts)
+                cr, cs = np.concatenate([cr[~tight], tr]), np.concatenate([cs[~tight], ts])
+                visible = np.concatenate([visible[~tight], t_visible])
+                pr, ps, n_split = np.concatenate([pr, tpr]), np.concatenate([ps, tps]), n_split + t_split
         # links that stay keep their estimate; only the new ones are estimated
         self.cluster_r, self.cluster_s = np.concatenate([r[~over], cr]), np.concatenate([s[~over], cs])
         estimate = tree.estimates(cr, cs)
-        if CLUSTER_VISIBILITY and len(cr):  # one representative pair of patches per new link
-            rep = tree.order[(tree.lo + tree.hi) // 2]
-            visible, _ = self.vis.fractions(self.el, rep[cr], rep[cs])
-            estimate = estimate * np.clip(visible, 0.0, 1.0)
+        if CLUSTER_VISIBILITY:
+            estimate = estimate * visible
         self.cluster_factor = np.concatenate([factor, estimate])
         self.stats.cluster_links = len(self.cluster_r)
         self._check_memory(len(pr))
         return pr, ps, n_split
+
+    def _cluster_visibility(self, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(visible, partial) of cluster links: the mean visible fraction over
+        CLUSTER_VISIBILITY_PAIRS^2 pairs of representative patches (evenly spaced in tree order
+        in each node), and whether any of them is partly visible."""
+        tree, k = self.tree, CLUSTER_VISIBILITY_PAIRS
+        total, partial = np.zeros(len(r)), np.zeros(len(r), bool)
+        if not (CLUSTER_VISIBILITY or CLUSTER_EPS_SHARE < 1.0) or not len(r):
+            return np.ones(len(r)), partial
+        for a in range(k):
+            pick_r = tree.order[tree.lo[r] + ((tree.hi[r] - tree.lo[r]) * (2 * a + 1)) // (2 * k)]
+            for b in range(k):
+                pick_s = tree.order[tree.lo[s] + ((tree.hi[s] - tree.lo[s]) * (2 * b + 1)) // (2 * k)]
+                visible, part = self.vis.fractions(self.el, pick_r, pick_s)
+                total += np.clip(visible, 0.0, 1.0)
+                partial |= part
+        return total / k ** 2, partial
 
     def refine(self) -> int:
         """One refinement pass with the current radiosities; returns how many links were split."""
@@ -462,7 +491,8 @@ def _near_bound(el: Elements, r: np.ndarray, s: np.ndarray, near_only: bool) -> 
 
     s lies in the sphere of radius ``R_s`` about its centroid, at least ``d`` from any point
     of r (the distance of that centre to r's plane, or to r's centroid less r's radius), and
-    the gap between the two elements' spheres is ``g``. From x, s fits in a cone of half-angle
+    the elements are at least ``g`` apart (their spheres' gap, or the height of one's lowest
+    vertex over the other's plane). From x, s fits in a cone of half-angle
     ``asin(R_s / d)``, whose projected solid angle is at most ``(R_s / d)^2``; every direction
     to s rises at most ``H_s / g`` above r's plane (``H_s``: the height of s's highest vertex
     over it), so its cosine is at most that, and the cone's plain solid angle is at most
@@ -480,15 +510,19 @@ def _near_bound(el: Elements, r: np.ndarray, s: np.ndarray, near_only: bool) -> 
     w = el.centroid[s] - el.centroid[r]
     dist = np.linalg.norm(w, axis=1)
     d = np.maximum(np.abs(np.einsum("mc,mc->m", w, el.normal[r])), dist - radius_r)
-    gap = dist - radius_r - radius_s
+    height_s = np.einsum("mkc,mc->mk", el.quads[s] - el.centroid[r][:, None, :], el.normal[r])
+    height_r = np.einsum("mkc,mc->mk", el.quads[r] - el.centroid[s][:, None, :], el.normal[s])
+    # the elements are at least this far apart: their spheres' gap, or the lowest vertex of
+    # one above the other's plane (a big wall's sphere holds the cubes in front of it)
+    gap = np.maximum(dist - radius_r - radius_s, np.maximum(height_s.min(axis=1), height_r.min(axis=1)))
     apart = gap > 0
     g = np.where(apart, gap, 1.0)
-    h_s = np.clip(np.einsum("mkc,mc->mk", el.quads[s] - el.centroid[r][:, None, :], el.normal[r]).max(axis=1), 0, None)
-    h_r = np.clip(np.einsum("mkc,mc->mk", el.quads[r] - el.centroid[s][:, None, :], el.normal[s]).max(axis=1), 0, None)
+    h_s, h_r = np.clip(height_s.max(axis=1), 0, None), np.clip(height_r.max(axis=1), 0, None)
     cos_r, cos_s = np.minimum(1.0, h_s / g), np.minimum(1.0, h_r / g)
     cone = (radius_s / np.maximum(d, radius_s)) ** 2 * np.minimum(1.0, 2.0 * cos_r)
     bound = np.minimum(cone, el.area[s] * cos_r * cos_s / (np.pi * g ** 2))
-    use = apart & el.splittable[r]
+    # a source as large as the receiver has a peak as wide as the 3x3 points' spacing: they see it
+    use = apart & el.splittable[r] & (radius_s < NEAR_SMALLER * radius_r)
     if near_only:
         use &= dist - radius_s < NEAR_RELATIVE * radius_r
     return np.where(use, bound, 0.0)
