@@ -25,7 +25,7 @@ from ._elements import Elements
 __all__ = ["link_factors", "ElementVisibility", "adaptive_factors"]
 
 RECEIVER_ORDER = 3  # Gauss points per direction on the receiver: 9 Lambert evaluations per link
-SETTLE_RAY_SAMPLES = 6  # the many-occluder pairs of ElementVisibility.exact trace this**4 rays at least
+SETTLE_RAY_SAMPLES = 5  # the many-occluder pairs of ElementVisibility.exact trace this**4 rays at least
 CULL_BEHIND = True  # leave out occluders behind either end's plane (ElementVisibility._classify)
 MAX_EXACT_OCCLUDERS = 10  # visibility.MAX_UNION: more possible occluders a pair trace rays (ElementVisibility.exact)
 
