@@ -85,7 +85,7 @@ def test_furnace_identity_through_occlusion(furnace):
 def test_furnace_identity_in_a_room_of_cubes():
     """A closed room holding eight small floating cubes, every face emitting 1 and reflecting
     0.5: B = 2 on every leaf within 1% at draft, link_tolerance=1e-2 (measured: worst leaf
-    0.65%, mean -0.12%; 1.1% / +0.15% before links that cannot split were settled in every pass,
+    0.61%, mean -0.11%; 1.1% / +0.15% before links that cannot split were settled in every pass,
     settled partly visible links got exact shadows in every preset and a near-source bound
     pushed a wall's links to small cubes before it down the wall's quadtree)."""
     from helpers import cube_room_scene
