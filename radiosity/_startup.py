@@ -149,14 +149,15 @@ def hold_signals_while_compiling() -> None:
 def guard_imports():
     """Run the package's imports; if this is the command, a signal among them exits cleanly."""
     command = started_as_command()
+    # numba's OpenMP workers spin between parallel loops by default, taking the CPU the serial
+    # passes between them need: passive waiting made the plates' fill 1.4-1.9x faster on a
+    # shared 2-core machine, and a library import without it ran the open 16 x 16 plates 5x
+    # slower than the command (docs/formfactors.md). So the import sets it too, before numba
+    # starts its threads; an OMP_WAIT_POLICY the user set wins (and one read already by an
+    # OpenMP runtime started earlier in the process stays as it was).
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     if command:
         signal.signal(signal.SIGTERM, _raise_terminated)
-        # numba's OpenMP workers spin between parallel loops by default, taking the CPU the
-        # serial passes between them need: passive waiting made the plates' fill 1.4-1.9x
-        # faster on a shared 2-core machine (docs/formfactors.md). The command owns its
-        # process, so it sets this (a library import leaves the host's OpenMP alone); an
-        # OMP_WAIT_POLICY the user set wins.
-        os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     try:
         if command:  # inside the try: it imports numba, seconds in which a Ctrl-C may come
             hold_signals_while_compiling()

@@ -68,3 +68,17 @@ def test_point_to_polygon_ignores_winding_and_never_returns_nan():
     assert np.isfinite(a).all()
     degenerate = radiosity.point_to_polygon(pts, normals, np.array([[0, 0, 1], [1, 1, 1], [2, 2, 1]], float))
     np.testing.assert_array_equal(degenerate, 0.0)
+
+
+def test_import_makes_openmp_wait_passively_unless_the_user_chose():
+    """numba's spinning OpenMP workers ran the open 16 x 16 plates 5x slower (docs/formfactors.md)."""
+    import os
+    import subprocess
+    import sys
+
+    code = "import os, radiosity; print(os.environ.get('OMP_WAIT_POLICY'))"
+    env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
+    for given, expected in ((None, "PASSIVE"), ("ACTIVE", "ACTIVE")):
+        run_env = env if given is None else {**env, "OMP_WAIT_POLICY": given}
+        out = subprocess.run([sys.executable, "-c", code], env=run_env, capture_output=True, text=True, check=True)
+        assert out.stdout.strip() == expected
