@@ -25,6 +25,8 @@ versions (``Visibility._classify``, ``Visibility._trace_numpy``, ``_occluders.cl
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
@@ -78,7 +80,9 @@ def _nearest_planes(quads: np.ndarray, planes: np.ndarray, scale: float, k: int 
     return np.concatenate(found, axis=1)
 
 
+@functools.lru_cache(maxsize=1)
 def _gauss_table():
+    """The cells' Gauss-Legendre table, built once (1.6 ms a fill: 3% of the blocked 8 x 8 plates')."""
     from ._cells_kernel import gauss_table
 
     return gauss_table(8)
