@@ -112,8 +112,12 @@ def build_occluders(quads: np.ndarray, normals: np.ndarray, groups: np.ndarray, 
         key = np.column_stack([groups[idx], np.round(n * 1e7), np.round(d / (1e-7 * scale))])
         _, inverse = np.unique(key, axis=0, return_inverse=True)
         inverse = inverse.ravel()
-        for g in range(inverse.max() + 1):
-            members = np.flatnonzero(inverse == g)
+        # the members of each plane group, in index order (a scan of all patches per group cost
+        # n^2: a 581k-triangle terrain, every triangle its own plane, never got past this loop)
+        by_group = np.argsort(inverse, kind="stable")
+        ends = np.cumsum(np.bincount(inverse))
+        for g in range(len(ends)):
+            members = by_group[ends[g - 1] if g else 0:ends[g]]
             merged = None
             if len(members) > 1:
                 merged = _merge_group(quads[idx[members]], n[members[0]], float(area[members].sum()))
