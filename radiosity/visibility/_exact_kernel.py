@@ -548,6 +548,26 @@ def _meets(lo, hi, blo, bhi, pad):
 
 
 @njit(cache=True, inline="always")
+def _next_leaf(stack, top, lo, hi, node_lo, node_hi, node_left, node_right, pad):
+    """One step of a depth-first BVH walk (``stack[:top + 1]`` pending, start with ``stack[0] = 0``,
+    ``top = 0``): (top, the next leaf node whose box meets [lo, hi] + pad), or (top, -1) when done.
+    Leaves come in the same order as the recursive walk (left child first)."""
+    while top >= 0:
+        node = stack[top]
+        top -= 1
+        if not _meets(lo, hi, node_lo[node], node_hi[node], pad):
+            continue
+        if node_left[node] >= 0:
+            top += 1
+            stack[top] = node_right[node]
+            top += 1
+            stack[top] = node_left[node]
+            continue
+        return top, node
+    return top, -1
+
+
+@njit(cache=True, inline="always")
 def _classify_pair(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, node_hi, node_left, node_right,
                    node_start, node_count, order, pad, tol, out_occ, stack, lo, hi, si, sj, outside, valid, gi, gj):
     """Walk the BVH for one pair; write its MAYBE occluders to out_occ (as many as fit).
@@ -560,17 +580,10 @@ def _classify_pair(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, nod
     n_maybe = 0
     top = 0
     stack[0] = 0
-    while top >= 0:
-        node = stack[top]
-        top -= 1
-        if not _meets(lo, hi, node_lo[node], node_hi[node], pad):
-            continue
-        if node_left[node] >= 0:
-            top += 1
-            stack[top] = node_right[node]
-            top += 1
-            stack[top] = node_left[node]
-            continue
+    while True:
+        top, node = _next_leaf(stack, top, lo, hi, node_lo, node_hi, node_left, node_right, pad)
+        if node < 0:
+            break
         for s in range(node_start[node], node_start[node] + node_count[node]):
             kk = order[s]
             if not _meets(lo, hi, olo[kk], ohi[kk], pad):
@@ -707,17 +720,10 @@ def _group_status(P, nP, Q, nQ, polys, normal, center, inward, olo, ohi, node_lo
     undecided = False
     top = 0
     stack[0] = 0
-    while top >= 0:
-        node = stack[top]
-        top -= 1
-        if not _meets(lo, hi, node_lo[node], node_hi[node], pad):
-            continue
-        if node_left[node] >= 0:
-            top += 1
-            stack[top] = node_right[node]
-            top += 1
-            stack[top] = node_left[node]
-            continue
+    while True:
+        top, node = _next_leaf(stack, top, lo, hi, node_lo, node_hi, node_left, node_right, pad)
+        if node < 0:
+            break
         for s in range(node_start[node], node_start[node] + node_count[node]):
             kk = order[s]
             if not _meets(lo, hi, olo[kk], ohi[kk], pad):

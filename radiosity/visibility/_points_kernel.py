@@ -16,7 +16,7 @@ from numba import njit, prange
 # numba's disk cache of this module's kernels holds the _exact_kernel helpers compiled in (and
 # the _geometry_kernels ones they inline), and is keyed on this file alone: a change there must
 # touch this file too, or stale code runs.
-from ._exact_kernel import _lambert, _meets, _point_hidden
+from ._exact_kernel import _lambert, _meets, _next_leaf, _point_hidden
 
 
 @njit(cache=True, inline="always")
@@ -159,17 +159,10 @@ def _classify_hull(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, nod
     n_maybe = 0
     top = 0
     stack[0] = 0
-    while top >= 0:
-        node = stack[top]
-        top -= 1
-        if not _meets(lo, hi, node_lo[node], node_hi[node], pad):
-            continue
-        if node_left[node] >= 0:
-            top += 1
-            stack[top] = node_right[node]
-            top += 1
-            stack[top] = node_left[node]
-            continue
+    while True:
+        top, node = _next_leaf(stack, top, lo, hi, node_lo, node_hi, node_left, node_right, pad)
+        if node < 0:
+            break
         for s in range(node_start[node], node_start[node] + node_count[node]):
             kk = order[s]
             if not _meets(lo, hi, olo[kk], ohi[kk], pad):
