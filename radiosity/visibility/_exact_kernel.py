@@ -485,17 +485,7 @@ def _classify_one(vi, vj, polys, normal, center, inward, kk, tol, si, sj, outsid
         return 0
     if not ((pos_i and neg_j) or (neg_i and pos_j)):
         return 2  # a patch straddles the plane
-    n_outside = 0
-    for e in range(nv):
-        valid[e] = inward[kk, e, 0] != 0.0 or inward[kk, e, 1] != 0.0 or inward[kk, e, 2] != 0.0
-        outside[e] = valid[e]
-        if valid[e]:
-            n_outside += 1
-            p0, p1, p2 = polys[kk, e, 0], polys[kk, e, 1], polys[kk, e, 2]
-            w0, w1, w2 = inward[kk, e, 0], inward[kk, e, 1], inward[kk, e, 2]
-            for a in range(4):
-                gi[a, e] = (vi[a, 0] - p0) * w0 + (vi[a, 1] - p1) * w1 + (vi[a, 2] - p2) * w2
-                gj[a, e] = (vj[a, 0] - p0) * w0 + (vj[a, 1] - p1) * w1 + (vj[a, 2] - p2) * w2
+    n_outside = _edge_offsets(polys, inward, kk, vi, 4, vj, 4, valid, outside, gi, gj)
     inside_all = True
     for a in range(4):
         for b in range(4):
@@ -545,6 +535,26 @@ _PAIR_BLOCK = 256
 def _meets(lo, hi, blo, bhi, pad):
     return (lo[0] <= bhi[0] + pad and lo[1] <= bhi[1] + pad and lo[2] <= bhi[2] + pad
             and hi[0] >= blo[0] - pad and hi[1] >= blo[1] - pad and hi[2] >= blo[2] - pad)
+
+
+@njit(cache=True, inline="always")
+def _edge_offsets(polys, inward, kk, P, nP, Q, nQ, valid, outside, gp, gq):
+    """Offsets of P[:nP] and Q[:nQ] along occluder kk's inward edge normals, into gp[:, e] and
+    gq[:, e]; ``valid[e]``: edge e has a normal (not a repeated vertex); ``outside[e]`` starts as
+    ``valid[e]``. Returns the number of valid edges."""
+    n_outside = 0
+    for e in range(polys.shape[1]):
+        valid[e] = inward[kk, e, 0] != 0.0 or inward[kk, e, 1] != 0.0 or inward[kk, e, 2] != 0.0
+        outside[e] = valid[e]
+        if valid[e]:
+            n_outside += 1
+            p0, p1, p2 = polys[kk, e, 0], polys[kk, e, 1], polys[kk, e, 2]
+            w0, w1, w2 = inward[kk, e, 0], inward[kk, e, 1], inward[kk, e, 2]
+            for a in range(nP):
+                gp[a, e] = (P[a, 0] - p0) * w0 + (P[a, 1] - p1) * w1 + (P[a, 2] - p2) * w2
+            for b in range(nQ):
+                gq[b, e] = (Q[b, 0] - p0) * w0 + (Q[b, 1] - p1) * w1 + (Q[b, 2] - p2) * w2
+    return n_outside
 
 
 @njit(cache=True, inline="always")
@@ -650,18 +660,7 @@ def _classify_set(P, nP, Q, nQ, polys, normal, center, inward, kk, tol, sp, sq, 
         return 0  # every pair on one side (or in the plane)
     if not ((pmax < -2.0 * tol and qmin > 2.0 * tol) or (pmin > 2.0 * tol and qmax < -2.0 * tol)):
         return 2
-    n_outside = 0
-    for e in range(nv):
-        valid[e] = inward[kk, e, 0] != 0.0 or inward[kk, e, 1] != 0.0 or inward[kk, e, 2] != 0.0
-        outside[e] = valid[e]
-        if valid[e]:
-            n_outside += 1
-            p0, p1, p2 = polys[kk, e, 0], polys[kk, e, 1], polys[kk, e, 2]
-            w0, w1, w2 = inward[kk, e, 0], inward[kk, e, 1], inward[kk, e, 2]
-            for a in range(nP):
-                gp[a, e] = (P[a, 0] - p0) * w0 + (P[a, 1] - p1) * w1 + (P[a, 2] - p2) * w2
-            for b in range(nQ):
-                gq[b, e] = (Q[b, 0] - p0) * w0 + (Q[b, 1] - p1) * w1 + (Q[b, 2] - p2) * w2
+    n_outside = _edge_offsets(polys, inward, kk, P, nP, Q, nQ, valid, outside, gp, gq)
     inside_all = True
     lim = tol + half
     for a in range(nP):

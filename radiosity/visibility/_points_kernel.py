@@ -16,7 +16,7 @@ from numba import njit, prange
 # numba's disk cache of this module's kernels holds the _exact_kernel helpers compiled in (and
 # the _geometry_kernels ones they inline), and is keyed on this file alone: a change there must
 # touch this file too, or stale code runs.
-from ._exact_kernel import _lambert, _meets, _next_leaf, _point_hidden
+from ._exact_kernel import _edge_offsets, _lambert, _meets, _next_leaf, _point_hidden
 
 
 @njit(cache=True, inline="always")
@@ -99,18 +99,7 @@ def _classify_hull_one(vi, vj, polys, normal, center, inward, kk, tol, si, sj, o
         return 0
     if not ((pos_i and neg_j) or (neg_i and pos_j)):
         return 2
-    n_outside = 0
-    for e in range(nv):
-        valid[e] = inward[kk, e, 0] != 0.0 or inward[kk, e, 1] != 0.0 or inward[kk, e, 2] != 0.0
-        outside[e] = valid[e]
-        if valid[e]:
-            n_outside += 1
-            p0, p1, p2 = polys[kk, e, 0], polys[kk, e, 1], polys[kk, e, 2]
-            w0, w1, w2 = inward[kk, e, 0], inward[kk, e, 1], inward[kk, e, 2]
-            for a in range(nvi):
-                gi[a, e] = (vi[a, 0] - p0) * w0 + (vi[a, 1] - p1) * w1 + (vi[a, 2] - p2) * w2
-            for a in range(nvj):
-                gj[a, e] = (vj[a, 0] - p0) * w0 + (vj[a, 1] - p1) * w1 + (vj[a, 2] - p2) * w2
+    n_outside = _edge_offsets(polys, inward, kk, vi, nvi, vj, nvj, valid, outside, gi, gj)
     inside_all = True
     for a in range(nvi):
         for b in range(nvj):
