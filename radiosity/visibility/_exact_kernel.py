@@ -486,27 +486,7 @@ def _classify_one(vi, vj, polys, normal, center, inward, kk, tol, si, sj, outsid
     if not ((pos_i and neg_j) or (neg_i and pos_j)):
         return 2  # a patch straddles the plane
     n_outside = _edge_offsets(polys, inward, kk, vi, 4, vj, 4, valid, outside, gi, gj)
-    inside_all = True
-    for a in range(4):
-        for b in range(4):
-            den = si[a] - sj[b]
-            if abs(den) <= tol:
-                return 2  # a segment runs (nearly) in the plane: neither inside nor separated
-            tt = si[a] / den
-            for e in range(nv):
-                if not valid[e]:
-                    continue
-                g = gi[a, e] + tt * (gj[b, e] - gi[a, e])
-                if g >= -tol and outside[e]:
-                    outside[e] = False
-                    n_outside -= 1
-                if g <= tol:
-                    inside_all = False
-            if n_outside == 0 and not inside_all:
-                return 2
-    if n_outside > 0:
-        return 0
-    return 1 if inside_all else 2
+    return _crossing_status(si, 4, sj, 4, gi, gj, valid, outside, n_outside, nv, tol, tol)
 
 
 @njit(cache=True, parallel=True)
@@ -555,6 +535,36 @@ def _edge_offsets(polys, inward, kk, P, nP, Q, nQ, valid, outside, gp, gq):
             for b in range(nQ):
                 gq[b, e] = (Q[b, 0] - p0) * w0 + (Q[b, 1] - p1) * w1 + (Q[b, 2] - p2) * w2
     return n_outside
+
+
+@njit(cache=True, inline="always")
+def _crossing_status(sa, na, sb, nb, ga, gb, valid, outside, n_outside, nv, den_tol, lim):
+    """FREE (0) / FULL (1) / MAYBE (2) of the segments from points a (plane offsets sa[:na], edge
+    offsets ga) to points b (sb[:nb], gb) that cross an occluder's plane, from where each
+    crosses it: g is affine along a segment, so g(a + t (b - a)) = g(a) + t (g(b) - g(a)).
+    ``n_outside``/``outside``: from :func:`_edge_offsets`. A segment (nearly) in the plane
+    (|sa - sb| <= den_tol) is MAYBE; ``lim``: the margin on the edge offsets."""
+    inside_all = True
+    for a in range(na):
+        for b in range(nb):
+            den = sa[a] - sb[b]
+            if abs(den) <= den_tol:
+                return 2  # a segment runs (nearly) in the plane: neither inside nor separated
+            tt = sa[a] / den
+            for e in range(nv):
+                if not valid[e]:
+                    continue
+                g = ga[a, e] + tt * (gb[b, e] - ga[a, e])
+                if g >= -lim and outside[e]:
+                    outside[e] = False
+                    n_outside -= 1
+                if g <= lim:
+                    inside_all = False
+            if n_outside == 0 and not inside_all:
+                return 2
+    if n_outside > 0:
+        return 0
+    return 1 if inside_all else 2
 
 
 @njit(cache=True, inline="always")
@@ -661,25 +671,8 @@ def _classify_set(P, nP, Q, nQ, polys, normal, center, inward, kk, tol, sp, sq, 
     if not ((pmax < -2.0 * tol and qmin > 2.0 * tol) or (pmin > 2.0 * tol and qmax < -2.0 * tol)):
         return 2
     n_outside = _edge_offsets(polys, inward, kk, P, nP, Q, nQ, valid, outside, gp, gq)
-    inside_all = True
-    lim = tol + half
-    for a in range(nP):
-        for b in range(nQ):
-            tt = sp[a] / (sp[a] - sq[b])
-            for e in range(nv):
-                if not valid[e]:
-                    continue
-                g = gp[a, e] + tt * (gq[b, e] - gp[a, e])
-                if g >= -lim and outside[e]:
-                    outside[e] = False
-                    n_outside -= 1
-                if g <= lim:
-                    inside_all = False
-            if n_outside == 0 and not inside_all:
-                return 2
-    if n_outside > 0:
-        return 0
-    return 1 if inside_all else 2
+    # separated by 2 tol on each side, so no segment lies in the plane (|sp - sq| > 4 tol)
+    return _crossing_status(sp, nP, sq, nQ, gp, gq, valid, outside, n_outside, nv, tol, tol + half)
 
 
 @njit(cache=True, inline="always")

@@ -16,7 +16,7 @@ from numba import njit, prange
 # numba's disk cache of this module's kernels holds the _exact_kernel helpers compiled in (and
 # the _geometry_kernels ones they inline), and is keyed on this file alone: a change there must
 # touch this file too, or stale code runs.
-from ._exact_kernel import _edge_offsets, _lambert, _meets, _next_leaf, _point_hidden
+from ._exact_kernel import _crossing_status, _edge_offsets, _lambert, _meets, _next_leaf, _point_hidden
 
 
 @njit(cache=True, inline="always")
@@ -100,27 +100,7 @@ def _classify_hull_one(vi, vj, polys, normal, center, inward, kk, tol, si, sj, o
     if not ((pos_i and neg_j) or (neg_i and pos_j)):
         return 2
     n_outside = _edge_offsets(polys, inward, kk, vi, nvi, vj, nvj, valid, outside, gi, gj)
-    inside_all = True
-    for a in range(nvi):
-        for b in range(nvj):
-            den = si[a] - sj[b]
-            if abs(den) <= tol:
-                return 2
-            tt = si[a] / den
-            for e in range(nv):
-                if not valid[e]:
-                    continue
-                g = gi[a, e] + tt * (gj[b, e] - gi[a, e])
-                if g >= -tol and outside[e]:
-                    outside[e] = False
-                    n_outside -= 1
-                if g <= tol:
-                    inside_all = False
-            if n_outside == 0 and not inside_all:
-                return 2
-    if n_outside > 0:
-        return 0
-    return 1 if inside_all else 2
+    return _crossing_status(si, nvi, sj, nvj, gi, gj, valid, outside, n_outside, nv, tol, tol)
 
 
 @njit(cache=True)
