@@ -177,16 +177,20 @@ def test_rows_to_csr_is_scipys_matrix(n, density, seed, shuffle):
 
 
 @settings(max_examples=25, deadline=None)
+def _reference_mirror(area, i, j, f, drop):
+    """fill_block's former numpy passes: both directions concatenated, (rows, cols, values, kept > drop)."""
+    ratio = np.divide(area[i], area[j], out=np.zeros(len(i)), where=area[j] > 0)
+    ri, rj, rv = np.concatenate([i, j]), np.concatenate([j, i]), np.concatenate([f, f * ratio])
+    return ri, rj, rv, rv > drop
+
+
 @given(n=st.integers(1, 30), m=st.integers(0, 200), seed=st.integers(0, 2**16), drop=st.sampled_from([0.0, 1e-3, 0.3]))
 def test_mirrored_is_the_concatenated_mirror(n, m, seed, drop):
-    # the reference: fill_block's former numpy passes (concatenate both directions, mask > drop)
     rng = np.random.default_rng(seed)
     area = np.where(rng.random(n) < 0.1, 0.0, rng.random(n))
     i, j = rng.integers(0, n, m), rng.integers(0, n, m)
     f = np.where(rng.random(m) < 0.2, 0.0, rng.random(m))
-    ratio = np.divide(area[i], area[j], out=np.zeros(m), where=area[j] > 0)
-    ri, rj, rv = np.concatenate([i, j]), np.concatenate([j, i]), np.concatenate([f, f * ratio])
-    keep = rv > drop
+    ri, rj, rv, keep = _reference_mirror(area, i, j, f, drop)
     got_i, got_j, got_v, dropped = mirrored(area, i, j, f, drop)
     np.testing.assert_array_equal(got_i, ri[keep])
     np.testing.assert_array_equal(got_j, rj[keep])
@@ -204,9 +208,7 @@ def test_parallel_mirror_and_csr_match_the_references(drop):
     area = np.where(rng.random(n) < 0.01, 0.0, rng.random(n))
     i, j = rng.integers(0, n, m), rng.integers(0, n, m)
     f = np.where(rng.random(m) < 0.2, 0.0, rng.random(m))
-    ratio = np.divide(area[i], area[j], out=np.zeros(m), where=area[j] > 0)
-    ri, rj, rv = np.concatenate([i, j]), np.concatenate([j, i]), np.concatenate([f, f * ratio])
-    keep = rv > drop
+    ri, rj, rv, keep = _reference_mirror(area, i, j, f, drop)
     got_i, got_j, got_v, dropped = mirrored(area, i, j, f, drop)
     for got, ref in ((got_i, ri[keep]), (got_j, rj[keep]), (got_v, rv[keep])):
         np.testing.assert_array_equal(got, ref)
