@@ -79,6 +79,25 @@ def write_json(name: str, payload: dict, out: str | None = None) -> Path:
     return path
 
 
+def run_cases(script: str | Path, specs, *, cwd: Path, tail: int = 800) -> list[dict]:
+    """Each spec (a JSON-able dict) measured by ``script --case SPEC`` in a fresh process (so
+    peak memory and compile state are its own): the JSON row its last line prints, or the spec
+    with ``failed`` (stderr's last line) when it exits non-zero. Prints each row as it comes."""
+    import subprocess
+
+    rows = []
+    for spec in specs:
+        done = subprocess.run([sys.executable, str(script), "--case", json.dumps(spec)], capture_output=True,
+                              text=True, cwd=cwd)
+        if done.returncode != 0:
+            rows.append({**spec, "failed": done.stderr.strip().splitlines()[-1:]})
+            print(spec, "failed:", done.stderr[-tail:], flush=True)
+            continue
+        rows.append(json.loads(done.stdout.strip().splitlines()[-1]))
+        print(json.dumps(rows[-1]), flush=True)
+    return rows
+
+
 def print_table(rows: list[dict], columns: list[str] | None = None, *, title: str | None = None) -> None:
     """Print ``rows`` (dicts) as an aligned plain-text table."""
     if not rows:

@@ -16,12 +16,11 @@ from __future__ import annotations
 
 import json
 import resource
-import subprocess
 import sys
 import time
 from pathlib import Path
 
-from _common import parse_args, print_table, write_json
+from _common import parse_args, print_table, run_cases, write_json
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "tests"))
@@ -64,16 +63,7 @@ def main() -> None:
         sizes, rooms = sizes[:2], rooms[:1]
     specs = ([{"kind": "sphere", "m": m, "tolerance": args.tolerance} for m in sizes]
              + [{"kind": "room", "k": k, "tolerance": args.tolerance} for k in rooms])
-    rows = []
-    for spec in specs:
-        done = subprocess.run([sys.executable, str(Path(__file__)), "--case", json.dumps(spec)], capture_output=True,
-                              text=True, cwd=HERE)
-        if done.returncode != 0:
-            rows.append({**spec, "failed": done.stderr.strip().splitlines()[-1:]})
-            print(spec, "failed:", done.stderr[-800:], flush=True)
-            continue
-        rows.append(json.loads(done.stdout.strip().splitlines()[-1]))
-        print(json.dumps(rows[-1]), flush=True)
+    rows = run_cases(Path(__file__), specs, cwd=HERE, tail=800)
     print_table(rows, ["kind", "faces", "tolerance", "seconds", "leaves", "links", "cluster_links", "links_per_face",
                        "max_error", "mean_error", "hierarchy_MB", "peak_rss_MB"], title="furnaces, B = 2")
     path = write_json("clusters", {"cases": rows})

@@ -16,12 +16,11 @@ from __future__ import annotations
 
 import json
 import resource
-import subprocess
 import sys
 import time
 from pathlib import Path
 
-from _common import RESULTS, parse_args, print_table, write_json
+from _common import RESULTS, parse_args, print_table, run_cases, write_json
 
 HERE = Path(__file__).resolve().parent
 
@@ -71,16 +70,7 @@ def main() -> None:
         p.add_argument("--matched", action="store_true", help="only uniform at 12.5 mm vs hierarchical draft")
 
     args = parse_args(__doc__.splitlines()[0], extra=extra)
-    rows = []
-    for spec in cases(args.quick, args.scale, args.matched):
-        done = subprocess.run([sys.executable, str(Path(__file__)), "--case", json.dumps(spec)], capture_output=True,
-                              text=True, cwd=HERE)
-        if done.returncode != 0:
-            rows.append({**spec, "failed": done.stderr.strip().splitlines()[-1:]})
-            print(spec, "failed:", done.stderr[-500:], flush=True)
-            continue
-        rows.append(json.loads(done.stdout.strip().splitlines()[-1]))
-        print(json.dumps(rows[-1]), flush=True)
+    rows = run_cases(Path(__file__), cases(args.quick, args.scale, args.matched), cwd=HERE, tail=500)
     print_table(rows, ["method", "preset", "link_tolerance", "min_element_rel", "max_patch_size", "seconds", "patches",
                        "links_or_nonzeros", "max_object_error", "peak_rss_MB"], title="Cornell box")
     name = "hierarchical_matched" if args.matched else "hierarchical"
