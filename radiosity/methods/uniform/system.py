@@ -201,6 +201,13 @@ def energy_balance(F: sp.csr_matrix, area: np.ndarray, rho: np.ndarray, emission
 ESCAPED_ROUND_OFF = 1e-9
 
 
+def front_share(F: sp.csr_matrix, area: np.ndarray) -> np.ndarray:
+    """(n,) share of each patch's power that lands on some front, ``sum_i A_i F_ij / A_j`` (its
+    row sum where reciprocity holds); 1 for patches without area."""
+    area = np.asarray(area, float)
+    return np.where(area > 0, (F.T @ area) / np.where(area > 0, area, 1.0), 1.0)
+
+
 def gaining_patches(F: sp.csr_matrix, area: np.ndarray, radiosity: np.ndarray, patch_object: np.ndarray,
                     names: list[str], *, tol: float = ESCAPED_ROUND_OFF, limit: int = 10) -> list[dict]:
     """The patches whose light is more than all accounted for: what makes "escaped" negative.
@@ -216,8 +223,8 @@ def gaining_patches(F: sp.csr_matrix, area: np.ndarray, radiosity: np.ndarray, p
         the patch index, the share (> 1) and the power gained per channel, (share - 1) A_j B_j.
     """
     area = np.asarray(area, float)
-    share = (F.T @ area) / np.where(area > 0, area, 1.0)
-    excess = np.where(area > 0, share - 1.0, 0.0)
+    share = front_share(F, area)
+    excess = share - 1.0
     gain = (excess * area)[:, None] * np.asarray(radiosity, float).reshape(len(area), -1)
     idx = np.flatnonzero(excess > tol)
     idx = idx[np.argsort(-gain[idx].sum(axis=1), kind="stable")][:limit]
@@ -259,8 +266,7 @@ def gain_note(energy: dict[str, list[float]], gaining: list[dict], tol: float = 
 def gained_power(F: sp.csr_matrix, area: np.ndarray, radiosity: np.ndarray) -> np.ndarray:
     """(3,) W: the light that the rows of ``F`` above 1 create, sum_j max(share_j - 1, 0) A_j B_j."""
     area = np.asarray(area, float)
-    share = (F.T @ area) / np.where(area > 0, area, 1.0)
-    excess = np.where(area > 0, np.maximum(share - 1.0, 0.0), 0.0)
+    excess = np.maximum(front_share(F, area) - 1.0, 0.0)
     return (excess * area) @ np.asarray(radiosity, float).reshape(len(area), -1)
 
 
@@ -280,8 +286,7 @@ def bound_rows(F: sp.csr_matrix, area: np.ndarray, tol: float = ESCAPED_ROUND_OF
     """
     area = np.asarray(area, float)
     rows = np.asarray(F.sum(axis=1)).ravel()
-    share = (F.T @ area) / np.where(area > 0, area, 1.0)
-    worst = np.maximum(rows, np.where(area > 0, share, 0.0))
+    worst = np.maximum(rows, front_share(F, area))
     over = worst > 1.0 + tol
     if not over.any():
         return F, 0
