@@ -588,6 +588,24 @@ def _next_leaf(stack, top, lo, hi, node_lo, node_hi, node_left, node_right, pad)
 
 
 @njit(cache=True, inline="always")
+def _next_occluder(stack, top, pos, end, lo, hi, olo, ohi, node_lo, node_hi, node_left, node_right, node_start,
+                   node_count, order, pad):
+    """The next occluder whose box meets [lo, hi] + pad, walking the BVH depth first (start with
+    ``stack[0] = 0`` and ``top = pos = end = 0``): (top, pos, end, occluder), occluder -1 when
+    done. ``pos:end`` is what is left of the current leaf's slots in ``order``."""
+    while True:
+        while pos < end:
+            kk = order[pos]
+            pos += 1
+            if _meets(lo, hi, olo[kk], ohi[kk], pad):
+                return top, pos, end, kk
+        top, node = _next_leaf(stack, top, lo, hi, node_lo, node_hi, node_left, node_right, pad)
+        if node < 0:
+            return top, pos, end, -1
+        pos, end = node_start[node], node_start[node] + node_count[node]
+
+
+@njit(cache=True, inline="always")
 def _classify_pair(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, node_hi, node_left, node_right,
                    node_start, node_count, order, pad, tol, out_occ, stack, lo, hi, si, sj, outside, valid, gi, gj):
     """Walk the BVH for one pair; write its MAYBE occluders to out_occ (as many as fit).
@@ -598,23 +616,20 @@ def _classify_pair(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, nod
         lo[c] = min(vi[:, c].min(), vj[:, c].min())
         hi[c] = max(vi[:, c].max(), vj[:, c].max())
     n_maybe = 0
-    top = 0
+    top, pos, end = 0, 0, 0
     stack[0] = 0
     while True:
-        top, node = _next_leaf(stack, top, lo, hi, node_lo, node_hi, node_left, node_right, pad)
-        if node < 0:
+        top, pos, end, kk = _next_occluder(stack, top, pos, end, lo, hi, olo, ohi, node_lo, node_hi, node_left,
+                                           node_right, node_start, node_count, order, pad)
+        if kk < 0:
             break
-        for s in range(node_start[node], node_start[node] + node_count[node]):
-            kk = order[s]
-            if not _meets(lo, hi, olo[kk], ohi[kk], pad):
-                continue
-            state = _classify_one(vi, vj, polys, normal, center, inward, kk, tol, si, sj, outside, valid, gi, gj)
-            if state == 1:
-                return 1, 0
-            if state == 2:
-                if n_maybe < out_occ.shape[0]:
-                    out_occ[n_maybe] = kk
-                n_maybe += 1
+        state = _classify_one(vi, vj, polys, normal, center, inward, kk, tol, si, sj, outside, valid, gi, gj)
+        if state == 1:
+            return 1, 0
+        if state == 2:
+            if n_maybe < out_occ.shape[0]:
+                out_occ[n_maybe] = kk
+            n_maybe += 1
     return (2 if n_maybe else 0), n_maybe
 
 
@@ -710,22 +725,19 @@ def _group_status(P, nP, Q, nQ, polys, normal, center, inward, olo, ohi, node_lo
         lo[c] = min(P[:nP, c].min(), Q[:nQ, c].min())
         hi[c] = max(P[:nP, c].max(), Q[:nQ, c].max())
     undecided = False
-    top = 0
+    top, pos, end = 0, 0, 0
     stack[0] = 0
     while True:
-        top, node = _next_leaf(stack, top, lo, hi, node_lo, node_hi, node_left, node_right, pad)
-        if node < 0:
+        top, pos, end, kk = _next_occluder(stack, top, pos, end, lo, hi, olo, ohi, node_lo, node_hi, node_left,
+                                           node_right, node_start, node_count, order, pad)
+        if kk < 0:
             break
-        for s in range(node_start[node], node_start[node] + node_count[node]):
-            kk = order[s]
-            if not _meets(lo, hi, olo[kk], ohi[kk], pad):
-                continue
-            state = _classify_set(P, nP, Q, nQ, polys, normal, center, inward, kk, tol, sp, sq, outside, valid,
-                                  gp, gq)
-            if state == 1:
-                return 1
-            if state == 2:
-                undecided = True
+        state = _classify_set(P, nP, Q, nQ, polys, normal, center, inward, kk, tol, sp, sq, outside, valid,
+                              gp, gq)
+        if state == 1:
+            return 1
+        if state == 2:
+            undecided = True
     return 2 if undecided else 0
 
 

@@ -16,7 +16,7 @@ from numba import njit, prange
 # numba's disk cache of this module's kernels holds the _exact_kernel helpers compiled in (and
 # the _geometry_kernels ones they inline), and is keyed on this file alone: a change there must
 # touch this file too, or stale code runs.
-from ._exact_kernel import _crossing_status, _edge_offsets, _lambert, _meets, _next_leaf, _point_hidden
+from ._exact_kernel import _crossing_status, _edge_offsets, _lambert, _next_occluder, _point_hidden
 
 
 @njit(cache=True, inline="always")
@@ -126,30 +126,27 @@ def _classify_hull(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, nod
             lo[c] = min(lo[c], vj[v, c])
             hi[c] = max(hi[c], vj[v, c])
     n_maybe = 0
-    top = 0
+    top, pos, end = 0, 0, 0
     stack[0] = 0
     while True:
-        top, node = _next_leaf(stack, top, lo, hi, node_lo, node_hi, node_left, node_right, pad)
-        if node < 0:
+        top, pos, end, kk = _next_occluder(stack, top, pos, end, lo, hi, olo, ohi, node_lo, node_hi, node_left,
+                                           node_right, node_start, node_count, order, pad)
+        if kk < 0:
             break
-        for s in range(node_start[node], node_start[node] + node_count[node]):
-            kk = order[s]
-            if not _meets(lo, hi, olo[kk], ohi[kk], pad):
+        if stamp_id >= 0:
+            if stamp[kk] != stamp_id:
+                _cap(vi[0], polys[kk], polys.shape[1], caps[kk])
+                stamp[kk] = stamp_id
+            if not _caps_meet(caps[kk], src_cap):
                 continue
-            if stamp_id >= 0:
-                if stamp[kk] != stamp_id:
-                    _cap(vi[0], polys[kk], polys.shape[1], caps[kk])
-                    stamp[kk] = stamp_id
-                if not _caps_meet(caps[kk], src_cap):
-                    continue
-            state = _classify_hull_one(vi, vj, polys, normal, center, inward, kk, tol, si, sj, outside, valid, gi,
-                                       gj)
-            if state == 1:
-                return 1, 0
-            if state == 2:
-                if n_maybe < out_occ.shape[0]:
-                    out_occ[n_maybe] = kk
-                n_maybe += 1
+        state = _classify_hull_one(vi, vj, polys, normal, center, inward, kk, tol, si, sj, outside, valid, gi,
+                                   gj)
+        if state == 1:
+            return 1, 0
+        if state == 2:
+            if n_maybe < out_occ.shape[0]:
+                out_occ[n_maybe] = kk
+            n_maybe += 1
     return (2 if n_maybe else 0), n_maybe
 
 
