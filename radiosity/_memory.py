@@ -127,6 +127,35 @@ def fill_bytes(n_patches: int) -> int:
     return int(n_patches) ** 2 * BYTES_PER_FACTOR
 
 
+# Bytes per factor of the out-of-core shards on disk: row and column (int32 each) and the
+# value (float64), as ``methods.uniform.shards`` saves them.
+SHARD_BYTES_PER_FACTOR = 4 + 4 + 8
+
+
+def check_shard_space(n_patches: int, folder: str | Path) -> int:
+    """Refuse an out-of-core fill whose shards may not fit in ``folder``'s file system.
+
+    The same worst case as :func:`check_fill` (every pair non-zero), so a fill that goes ahead
+    cannot run the disk full half-way. Returns the estimate in bytes.
+
+    Raises
+    ------
+    OSError
+        ``ENOSPC``, naming the estimate, the free space and the knobs.
+    """
+    import errno
+    import shutil
+
+    needed = int(n_patches) ** 2 * SHARD_BYTES_PER_FACTOR
+    free = shutil.disk_usage(folder).free
+    if needed > free:
+        raise OSError(errno.ENOSPC, f"the out-of-core fill of {n_patches:,} patches needs up to "
+                                    f"{format_bytes(needed)} on disk for its shards and {folder} has "
+                                    f"{format_bytes(free)} free; set TMPDIR to a larger disk, or use "
+                                    f"larger patches (--max-patch-size) or --method hierarchical")
+    return needed
+
+
 def check_fill(n_patches: int, *, budget: int | None = None, patch_size: float | None = None) -> int:
     """Estimate the worst-case bytes of the view-factor fill; raise if over budget.
 

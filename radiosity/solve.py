@@ -216,6 +216,7 @@ def _solve_out_of_core(cut, options, refusal: MemoryBudgetError, timings: dict[s
                                 f"(the {options.solver} solver needs F in memory)")
     pairs = out_of_core_plan(cut.n_patches, refusal)
     budget, source = _memory.budget_bytes()
+    disk = _memory.check_shard_space(cut.n_patches, tempfile.gettempdir())
     folder = Path(tempfile.mkdtemp(prefix="radiosity-F-"))
     inactive = _inactive(cut)
     problem = FillProblem.from_scene(cut, _fill_settings(options), ~inactive)
@@ -242,7 +243,8 @@ def _solve_out_of_core(cut, options, refusal: MemoryBudgetError, timings: dict[s
     balance = energy_balance(F, cut.patch_area, cut.reflectance, cut.emission, radiosity)
     storage = {"where": "out of core", "shards": F.n_blocks, "pairs_per_block": pairs,
                "passes": info["passes"], "estimate_in_memory": _memory.format_bytes(_memory.fill_bytes(cut.n_patches)),
-               "budget": f"{_memory.format_bytes(budget)} ({source})"}
+               "budget": f"{_memory.format_bytes(budget)} ({source})",
+               "disk_estimate": _memory.format_bytes(disk)}
     return Solution(scene=cut, radiosity=radiosity, F=F, options=options, timings=timings, fill=stats,
                     solver=report, energy=balance, view_factor_storage=storage)
 

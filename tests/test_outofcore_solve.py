@@ -140,3 +140,25 @@ def test_solve_shards_refuses_solvers_that_need_F():
     F, rho, e = _system(0, 5)
     with pytest.raises(ValueError, match="needs F in memory"):
         solve_shards(F, rho, e, method="direct")
+
+
+def test_a_disk_too_small_for_the_shards_is_refused_before_the_fill(scene, monkeypatch, tmp_path):
+    """The shards' worst case (16 bytes a pair) is checked against the free space first: the fill
+    never starts, no shard folder is left, and the message names the estimate and the knobs."""
+    import shutil
+    import tempfile
+    from collections import namedtuple
+
+    monkeypatch.setenv(_memory.ENV_BUDGET, str(BUDGET))
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: usage(10**9, 10**9 - 10**5, 10**5))
+    with pytest.raises(OSError, match=r"needs up to .* on disk for its shards .* TMPDIR") as caught:
+        radiosity.solve(scene, preset="draft", max_patch_size=SIZE, cache=False)
+    assert caught.value.errno == 28  # ENOSPC: the CLI's one-line exit 2
+    assert not list(tmp_path.iterdir())  # no radiosity-F-* folder was made
+
+
+def test_the_out_of_core_summary_states_the_disk_estimate(out_of_core):
+    n = out_of_core.scene.n_patches
+    assert out_of_core.view_factor_storage["disk_estimate"] == _memory.format_bytes(n * n * 16)
