@@ -136,7 +136,8 @@ def check_shard_space(n_patches: int, folder: str | Path) -> int:
     """Refuse an out-of-core fill whose shards may not fit in ``folder``'s file system.
 
     The same worst case as :func:`check_fill` (every pair non-zero), so a fill that goes ahead
-    cannot run the disk full half-way. Returns the estimate in bytes.
+    cannot run the disk full half-way. ``folder`` need not exist yet: its nearest existing
+    parent tells the file system. Returns the estimate in bytes.
 
     Raises
     ------
@@ -147,7 +148,10 @@ def check_shard_space(n_patches: int, folder: str | Path) -> int:
     import shutil
 
     needed = int(n_patches) ** 2 * SHARD_BYTES_PER_FACTOR
-    free = shutil.disk_usage(folder).free
+    existing = Path(folder).absolute()
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    free = shutil.disk_usage(existing).free
     if needed > free:
         raise OSError(errno.ENOSPC, f"the out-of-core fill of {n_patches:,} patches needs up to "
                                     f"{format_bytes(needed)} on disk for its shards and {folder} has "

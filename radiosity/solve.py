@@ -347,6 +347,7 @@ def write_view_factors(scene: Scene, path, *, preset: str = "default", pairs_per
 
     options = _view_factor_options(preset, {**overrides, "cache": False})
     cut = _cut(scene, options)
+    _memory.check_shard_space(cut.n_patches, path)
     settings = _fill_settings(options)
     problem = FillProblem.from_scene(cut, settings, ~_inactive(cut))
     update, close = _progress_bar(options.progress, cut.n_patches, "form factors")

@@ -115,3 +115,16 @@ def test_cli_out_of_core_under_a_budget_smaller_than_the_matrix(tmp_path, monkey
     assert (F.tocsr() != whole).nnz == 0  # what the in-memory fill gives where it fits
     assert main(args + ["--out-of-core", "--vf", str(tmp_path / "x.vf"), "-o", str(out)]) == 2
     assert "--out-of-core" in capsys.readouterr().err
+
+
+def test_a_shard_folder_on_a_disk_too_small_is_refused_before_any_shard(scene, tmp_path, monkeypatch):
+    """The shards' worst case is checked against the file system of the (not yet made) folder."""
+    import shutil
+    from collections import namedtuple
+
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: usage(10**9, 10**9 - 10**4, 10**4))
+    target = tmp_path / "new" / "F.shards"
+    with pytest.raises(OSError, match="needs up to .* on disk for its shards"):
+        radiosity.write_view_factors(scene, target)
+    assert not (tmp_path / "new").exists()
