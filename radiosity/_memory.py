@@ -132,12 +132,17 @@ def fill_bytes(n_patches: int) -> int:
 SHARD_BYTES_PER_FACTOR = 4 + 4 + 8
 
 
-def check_shard_space(n_patches: int, folder: str | Path) -> int:
+# The end of the out-of-core solve's disk refusal: its shards go to the temp folder, which TMPDIR moves.
+SOLVE_SHARD_KNOBS = "set TMPDIR to a larger disk, or use larger patches (--max-patch-size) or --method hierarchical"
+
+
+def check_shard_space(n_patches: int, folder: str | Path, knobs: str = SOLVE_SHARD_KNOBS) -> int:
     """Refuse an out-of-core fill whose shards may not fit in ``folder``'s file system.
 
     The same worst case as :func:`check_fill` (every pair non-zero), so a fill that goes ahead
     cannot run the disk full half-way. ``folder`` need not exist yet: its nearest existing
-    parent tells the file system. Returns the estimate in bytes.
+    parent tells the file system. ``knobs`` ends the message: what the caller can change.
+    Returns the estimate in bytes.
 
     Raises
     ------
@@ -155,8 +160,7 @@ def check_shard_space(n_patches: int, folder: str | Path) -> int:
     if needed > free:
         raise OSError(errno.ENOSPC, f"the out-of-core fill of {n_patches:,} patches needs up to "
                                     f"{format_bytes(needed)} on disk for its shards and {folder} has "
-                                    f"{format_bytes(free)} free; set TMPDIR to a larger disk, or use "
-                                    f"larger patches (--max-patch-size) or --method hierarchical")
+                                    f"{format_bytes(free)} free; {knobs}")
     return needed
 
 

@@ -347,7 +347,8 @@ def write_view_factors(scene: Scene, path, *, preset: str = "default", pairs_per
 
     options = _view_factor_options(preset, {**overrides, "cache": False})
     cut = _cut(scene, options)
-    _memory.check_shard_space(cut.n_patches, path)
+    _memory.check_shard_space(cut.n_patches, path, "write them to a larger disk, or use larger patches "
+                                                   "(--max-patch-size)")
     settings = _fill_settings(options)
     problem = FillProblem.from_scene(cut, settings, ~_inactive(cut))
     update, close = _progress_bar(options.progress, cut.n_patches, "form factors")

@@ -125,6 +125,7 @@ def test_a_shard_folder_on_a_disk_too_small_is_refused_before_any_shard(scene, t
     usage = namedtuple("usage", "total used free")
     monkeypatch.setattr(shutil, "disk_usage", lambda path: usage(10**9, 10**9 - 10**4, 10**4))
     target = tmp_path / "new" / "F.shards"
-    with pytest.raises(OSError, match="needs up to .* on disk for its shards"):
+    with pytest.raises(OSError, match="needs up to .* on disk for its shards") as caught:
         radiosity.write_view_factors(scene, target)
     assert not (tmp_path / "new").exists()
+    assert "larger disk" in str(caught.value) and "TMPDIR" not in str(caught.value)  # the user chose the folder
