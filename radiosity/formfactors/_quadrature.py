@@ -82,6 +82,27 @@ def split_patch_points(quads: np.ndarray, order: int, splits: int) -> tuple[np.n
     return points, jac * wuv[None, :]
 
 
+def square_cell_points(quads: np.ndarray, u0: np.ndarray, v0: np.ndarray, size: np.ndarray, order: int
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss points on parameter squares ``[u0, u0 + size] x [v0, v0 + size]`` of patches.
+
+    The cell-by-cell form of :func:`split_patch_points`, for adaptive receiver integrals: row c
+    is the square of patch ``quads[c]`` (n, 4, 3) at ``u0[c], v0[c]`` with side ``size[c]``.
+
+    Returns
+    -------
+    points : (n, order**2, 3) float
+    weights : (n, order**2) float
+        Weights sum to each cell's area.
+    """
+    nodes, w = gauss_legendre_01(order)
+    u = u0[:, None] + size[:, None] * np.repeat(nodes, order)[None, :]
+    v = v0[:, None] + size[:, None] * np.tile(nodes, order)[None, :]
+    wuv = (np.repeat(w, order) * np.tile(w, order))[None, :] * (size * size)[:, None]
+    points, jac = _map_square(quads, u, v)
+    return points, jac * wuv
+
+
 def _map_square(quads: np.ndarray, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Points and area Jacobian of each patch's bilinear (or collapsed) map at (u, v).
 

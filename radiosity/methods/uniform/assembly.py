@@ -154,8 +154,8 @@ def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettin
     classified once for both.
     """
     from ...visibility import FULL, MAYBE
-    from ...visibility._constants import (MAX_CELL_OCCLUDERS, SHADOW_CELLS_BELOW, SHADOW_ORDER_EXTRA,
-                                          SHADOW_RTOL_SHARE)
+    from ...visibility._constants import (CELL_FALLBACK_ATOL, MAX_CELL_OCCLUDERS, SHADOW_ATOL_SHARE, SHADOW_CELL_ORDER,
+                                          SHADOW_CELLS_BELOW, SHADOW_RTOL_SHARE)
 
     if visibility.cull and visibility.n_occluders == 0:  # nothing can block: every pair is free
         return
@@ -208,19 +208,24 @@ def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettin
             # the hidden part over receiver cells cut along the shadow's edges: F = F_unoccluded - hidden
             unocc = f[nz[part[sel]]]
             hidden = visibility.exact_hidden(pi[sel], pj[sel], *subset(sel),
-                                             SHADOW_RTOL_SHARE * settings.formfactor_rtol, unocc,
-                                             fallback_order=max(settings.near_order, 8))
+                                             SHADOW_RTOL_SHARE * settings.formfactor_rtol, unocc)
             seen = np.clip(unocc - hidden, 0.0, unocc)
             frac[sel] = np.where(unocc > 0, seen / np.where(unocc > 0, unocc, 1.0), 1.0)
             exact = exact & ~cells
-        # the rest: exact shadows at fixed Gauss points of the receiver, far pairs too. One point
-        # (the centroid) made a far pair all seen or all hidden: in a closed room of boxes at the
-        # default preset rows summed to 0.994-1.008 with it, 0.9992-1.0007 with 3 x 3 points
-        # (bench/closed_boxes.py, docs/visibility.md).
+        # the rest: exact shadows on receiver cells refined where the hidden factor varies, far
+        # pairs too. Fixed Gauss points smeared a shadow's edge across the receiver: a plate with
+        # a centred blocker erred by 2.4e-3 at 4 x 4 points, and in a closed room of boxes at the
+        # default preset rows summed to 0.9987-1.0017 (bench/closed_boxes.py, docs/visibility.md).
         if exact.any():
             sel = np.flatnonzero(exact)
-            frac[sel] = visibility.exact_fraction(pi[sel], pj[sel], *subset(sel),
-                                                  settings.near_order + SHADOW_ORDER_EXTRA)
+            unocc = f[nz[part[sel]]]
+            # each pair to the tighter of visibility_atol and formfactor_rtol of its factor: the
+            # shadow's error then stays below the unoccluded factor's own
+            atol = np.minimum(settings.visibility_rtol, settings.formfactor_rtol * unocc)
+            atol = SHADOW_ATOL_SHARE * np.maximum(atol, CELL_FALLBACK_ATOL)
+            hidden = visibility.adaptive_hidden(pi[sel], pj[sel], *subset(sel), atol, order=SHADOW_CELL_ORDER)
+            seen = np.clip(unocc - hidden, 0.0, unocc)
+            frac[sel] = np.where(unocc > 0, seen / np.where(unocc > 0, unocc, 1.0), 1.0)
     f[nz[part]] *= frac
 
 

@@ -31,8 +31,9 @@ __all__ = ["FormFactorCache", "cache_dir", "cache_limit"]
 FORMAT_VERSION = 1
 # Part of every key: bump it when the fill gives different numbers for the same settings, so
 # that no cached matrix of the older rules is served. 2: the fine preset's exact shadows at fixed
-# receiver points (visibility._constants.SHADOW_CELLS_BELOW), after SHADOW_ORDER_EXTRA.
-FILL_VERSION = 2
+# receiver points (visibility._constants.SHADOW_CELLS_BELOW), after SHADOW_ORDER_EXTRA. 3: exact
+# shadows outside the cells on adaptively refined receiver squares (Visibility.adaptive_hidden).
+FILL_VERSION = 3
 ENV_SIZE = "RADIOSITY_CACHE_SIZE"
 DEFAULT_LIMIT = 2 << 30  # 2 GiB: a few hundred Cornell-box-sized matrices, a handful of big ones
 
