@@ -80,7 +80,7 @@ WINDING_BUDGET = 50_000_000
 # Exact shadows outside the shadow-aligned cells are integrated on receiver squares refined
 # where their SHADOW_CELL_ORDER^2-point rule and their four children's disagree
 # (``Visibility.adaptive_hidden``), each pair to this share of the tighter of the fill's
-# visibility_atol and formfactor_rtol times the pair's unoccluded factor. Blocked plates one
+# visibility_atol and formfactor_rtol, both read as absolute errors. Blocked plates one
 # patch each, default preset's tolerances: 2.4e-3 off at the 4 x 4 fixed points this replaced,
 # 4.6e-7 at atol 1e-5 (tests/test_assembly.py).
 SHADOW_ATOL_SHARE = 0.1
