@@ -428,7 +428,7 @@ class Visibility:
         corner = np.zeros((m, 2))
         size = np.ones(m)
         coarse, area = self._cell_hidden(i, j, lists, pair, corner, size, order)
-        patch_area = np.bincount(pair, weights=area, minlength=m)
+        patch_area = area  # the root squares are the whole patches
         offsets = np.array([[0.0, 0.0], [0.5, 0.0], [0.0, 0.5], [0.5, 0.5]])
         for depth in range(max_depth):
             pair4 = np.repeat(pair, 4)

@@ -209,8 +209,7 @@ def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettin
             unocc = f[nz[part[sel]]]
             hidden = visibility.exact_hidden(pi[sel], pj[sel], *subset(sel),
                                              SHADOW_RTOL_SHARE * settings.formfactor_rtol, unocc)
-            seen = np.clip(unocc - hidden, 0.0, unocc)
-            frac[sel] = np.where(unocc > 0, seen / np.where(unocc > 0, unocc, 1.0), 1.0)
+            frac[sel] = _seen_fraction(unocc, hidden)
             exact = exact & ~cells
         # the rest: exact shadows on receiver cells refined where the hidden factor varies, far
         # pairs too. Fixed Gauss points smeared a shadow's edge across the receiver: a plate with
@@ -223,9 +222,14 @@ def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettin
             # errors (relative to each pair's factor, the 50-box furnace took over 10 min, not 6)
             atol = SHADOW_ATOL_SHARE * min(settings.visibility_rtol, settings.formfactor_rtol)
             hidden = visibility.adaptive_hidden(pi[sel], pj[sel], *subset(sel), atol, order=SHADOW_CELL_ORDER)
-            seen = np.clip(unocc - hidden, 0.0, unocc)
-            frac[sel] = np.where(unocc > 0, seen / np.where(unocc > 0, unocc, 1.0), 1.0)
+            frac[sel] = _seen_fraction(unocc, hidden)
     f[nz[part]] *= frac
+
+
+def _seen_fraction(unocc: np.ndarray, hidden: np.ndarray) -> np.ndarray:
+    """The visible fraction (F_unoccluded - hidden) / F_unoccluded, in [0, 1] (1 where F_unoccluded is 0)."""
+    seen = np.clip(unocc - hidden, 0.0, unocc)
+    return np.where(unocc > 0, seen / np.where(unocc > 0, unocc, 1.0), 1.0)
 
 
 def _row_blocks(n: int, pairs_per_block: int) -> list[tuple[int, int]]:
