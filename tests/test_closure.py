@@ -49,15 +49,6 @@ def test_cap_touching_the_receivers_edge_hides_nothing():
     np.testing.assert_allclose(vis.ray_fraction(i, j, rows=rows, occ=occ), 1.0, atol=1e-12)
 
 
-@pytest.fixture(scope="module")
-def concentric_prisms(tmp_path_factory):
-    objects = {"inner": prism(0.5, 4.0, RING, inward=False), "outer": prism(1.0, 4.8, RING, inward=True, z0=-0.4)}
-    with warnings.catch_warnings():  # no emitter: a note says so
-        warnings.simplefilter("ignore", radiosity.RadiosityWarning)
-        scene = radiosity.load_scene(write_obj(tmp_path_factory.mktemp("prisms") / "prisms.obj", objects))
-        return scene, radiosity.view_factors(scene, cache=False)
-
-
 def test_convex_body_inside_a_closed_prism_sees_all_of_it(concentric_prisms):
     """A convex body's rows: nothing of it can be hidden from it but by itself (it sees only the
     shell), so every inner row sums to 1 to the quadrature's accuracy (before: 0.548)."""
@@ -67,9 +58,9 @@ def test_convex_body_inside_a_closed_prism_sees_all_of_it(concentric_prisms):
     np.testing.assert_allclose(rows[inner], 1.0, atol=1e-6)
 
 
-@pytest.mark.xfail(strict=True, reason="shell rows 0.99198-1.00626: pairs behind more than 4 occluders keep the "
-                   "receiver's fixed points, and a 4.8 m wall's shadow edge is smeared over them; closed-object "
-                   "culling leaves the caps' 24 triangles (median 17 occluders a pair), see docs/visibility.md")
+@pytest.mark.xfail(strict=True, reason="shell rows 0.999993-1.000002: pairs behind more than 4 occluders take "
+                   "receiver squares refined along the shadows' edges (at most 6 levels), not the shadow-aligned "
+                   "cells; closed-object culling leaves the caps' triangles, see docs/visibility.md")
 def test_closed_prism_shell_rows_close(concentric_prisms):
     scene, F = concentric_prisms
     rows = np.asarray(F.sum(axis=1)).ravel()
@@ -190,8 +181,8 @@ def _rows(preset: str, **overrides) -> np.ndarray:
 
 # The fill computes each unordered pair once, from its smaller patch, and mirrors it by
 # reciprocity: a row then carries the other side's shadow-quadrature error too. At 3 x 3 receiver
-# points for exact shadows 4 of 413 rows reached 1.5e-3 from 1; at (near_order + 1)^2 points
-# (visibility._constants.SHADOW_ORDER_EXTRA) the worst is 6.6e-4.
+# points for exact shadows 4 of 413 rows reached 1.5e-3 from 1, at 4 x 4 points 6.6e-4; on receiver
+# squares refined along the shadows' edges (Visibility.adaptive_hidden) the worst is 6.0e-4.
 @pytest.mark.parametrize("preset, max_patch_size, atol", [
     ("draft", None, 1e-2),
     ("default", 0.4, 1e-3),

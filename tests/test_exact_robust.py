@@ -125,7 +125,8 @@ def test_solve_finishes_and_notes_the_fallback(monkeypatch, tmp_path):
     scene = radiosity.load_scene(radiosity.bundled_scene("cornell_box"))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        solution = radiosity.solve(scene, preset="draft", visibility="exact", cache=False)
+        # 0.25 m patches: every point of the Python union path costs a shapely call
+        solution = radiosity.solve(scene, preset="draft", visibility="exact", cache=False, max_patch_size=0.25)
     notes = [str(w.message) for w in caught if issubclass(w.category, radiosity.RadiosityWarning)]
     assert any("snap-rounding" in n for n in notes), notes
     assert np.isfinite(solution.radiosity).all()
