@@ -29,9 +29,11 @@ CHUNK_CLASSIFY = 262_144
 # Exact-shadow rows (receiver point, source, occluder) per numpy chunk.
 CHUNK_SHADOWS = 100_000
 
-# Most hidden polygons at one receiver point united by inclusion-exclusion (2**n terms at worst,
-# pruned where intersections are empty); more go to shapely.
-MAX_UNION = 10
+# Most hidden polygons at one receiver point united by the compiled kernels (inclusion-exclusion
+# up to _exact_kernel.IE_MAX_POLYGONS, then the sum over the union's boundary, n^2 edge tests);
+# more go to shapely. 10 while inclusion-exclusion did it all: 12-sided concentric prisms sent
+# points with ~20 to shapely, and their 72-patch view factors took 100 s instead of 33 s.
+MAX_UNION = 32
 
 # The same for the shadow-aligned cells, whose pairs fall back to fixed points past it: in a
 # room full of boxes a point sees the three faces of each of several boxes hide overlapping

@@ -51,6 +51,29 @@ def _clip(src, n, dst, ax, ay, az, d):
     return m
 
 
+@njit(cache=True, inline="always")
+def _edge_term(x, nx, p, q, t0=0.0, t1=1.0):
+    """Lambert's term of the piece [t0, t1] of the edge p -> q seen from x (normal nx): the angle
+    it subtends times the cosine of its plane through x. A polygon's terms sum to 2 pi times its
+    form factor, and the terms of pieces of one edge add up to the edge's (one plane through x)."""
+    ax = p[0] + t0 * (q[0] - p[0]) - x[0]
+    ay = p[1] + t0 * (q[1] - p[1]) - x[1]
+    az = p[2] + t0 * (q[2] - p[2]) - x[2]
+    bx = p[0] + t1 * (q[0] - p[0]) - x[0]
+    by = p[1] + t1 * (q[1] - p[1]) - x[1]
+    bz = p[2] + t1 * (q[2] - p[2]) - x[2]
+    cx = ay * bz - az * by
+    cy = az * bx - ax * bz
+    cz = ax * by - ay * bx
+    s = math.sqrt(cx * cx + cy * cy + cz * cz)
+    la = ax * ax + ay * ay + az * az
+    lb = bx * bx + by * by + bz * bz
+    if s <= 1e-14 * math.sqrt(la * lb):
+        return 0.0
+    theta = math.atan2(s, ax * bx + ay * by + az * bz)
+    return theta * (cx * nx[0] + cy * nx[1] + cz * nx[2]) / s
+
+
 @njit(cache=True)
 def _lambert(x, nx, poly, n, scratch):
     """Lambert's form factor from point x (normal nx) to polygon poly[:n], horizon-clipped."""
@@ -59,23 +82,7 @@ def _lambert(x, nx, poly, n, scratch):
         return 0.0
     total = 0.0
     for k in range(m):
-        k2 = k + 1 if k + 1 < m else 0
-        ax = scratch[k, 0] - x[0]
-        ay = scratch[k, 1] - x[1]
-        az = scratch[k, 2] - x[2]
-        bx = scratch[k2, 0] - x[0]
-        by = scratch[k2, 1] - x[1]
-        bz = scratch[k2, 2] - x[2]
-        cx = ay * bz - az * by
-        cy = az * bx - ax * bz
-        cz = ax * by - ay * bx
-        s = math.sqrt(cx * cx + cy * cy + cz * cz)
-        la = ax * ax + ay * ay + az * az
-        lb = bx * bx + by * by + bz * bz
-        if s <= 1e-14 * math.sqrt(la * lb):
-            continue
-        theta = math.atan2(s, ax * bx + ay * by + az * bz)
-        total += theta * (cx * nx[0] + cy * nx[1] + cz * nx[2]) / s
+        total += _edge_term(x, nx, scratch[k], scratch[k + 1 if k + 1 < m else 0])
     return min(abs(total) / _TWO_PI, 1.0)
 
 
@@ -282,13 +289,146 @@ def _intersect(pa, na, pb, nb, sn, out, sa, sb):
     return m
 
 
+# Past this many hidden polygons at a point, their union's form factor is summed over its
+# boundary (_union_factor_edges, n^2 edge tests) instead of by inclusion-exclusion (up to 2^n
+# intersections: adjacent shadows touch along an edge, so their intersections are not pruned).
+IE_MAX_POLYGONS = 4
+# Distance from an edge's line, relative to the hidden polygons' extent, within which another
+# polygon's edge counts as lying on it (shared edges of adjacent shadows, horizon cuts).
+_ON_LINE_REL = 1e-9
+
+
+@njit(cache=True)
+def _union_factor_edges(x, nx, hp, hn, n_polys, sn, poly, count, iv):
+    """Form factor from x to the union of the convex polygons hp[k, :hn[k]] (one plane, one
+    orientation), summed over the union's boundary.
+
+    Lambert's formula is a sum over edges, and pieces of an edge add up, so the union's factor
+    is the sum over every polygon's edges of the pieces that lie outside all the others. Pieces
+    on another polygon's edge line count once: where the two lie on opposite sides (a shared
+    edge) both are kept and cancel; on the same side (duplicates, the horizon's cut) only the
+    lower-numbered polygon's counts. poly (n_polys, >= cap + 1, 3) and count: scratch for the
+    horizon-clipped polygons; iv (n_polys, >= 2): scratch for the covered parameter intervals.
+    """
+    d = -(nx[0] * x[0] + nx[1] * x[1] + nx[2] * x[2])
+    extent = 0.0
+    for k in range(n_polys):
+        m = _clip(hp[k], hn[k], poly[k], nx[0], nx[1], nx[2], d)
+        count[k] = m if m >= 3 else 0
+        for v in range(count[k]):
+            extent = max(extent, abs(poly[k, v, 0] - x[0]) + abs(poly[k, v, 1] - x[1]) + abs(poly[k, v, 2] - x[2]))
+    eps = _ON_LINE_REL * extent
+    total = 0.0
+    for k in range(n_polys):
+        n = count[k]
+        for e in range(n):
+            e2 = e + 1 if e + 1 < n else 0
+            dx = poly[k, e2, 0] - poly[k, e, 0]
+            dy = poly[k, e2, 1] - poly[k, e, 1]
+            dz = poly[k, e2, 2] - poly[k, e, 2]
+            if abs(dx) + abs(dy) + abs(dz) <= eps:
+                continue
+            n_iv = _covered_intervals(poly, count, n_polys, k, e, sn, eps, iv)
+            # walk the uncovered pieces of the edge, intervals in order of their start
+            for a in range(1, n_iv):
+                lo, hi = iv[a, 0], iv[a, 1]
+                b = a - 1
+                while b >= 0 and iv[b, 0] > lo:
+                    iv[b + 1, 0] = iv[b, 0]
+                    iv[b + 1, 1] = iv[b, 1]
+                    b -= 1
+                iv[b + 1, 0] = lo
+                iv[b + 1, 1] = hi
+            t = 0.0
+            for a in range(n_iv + 1):
+                stop = iv[a, 0] if a < n_iv else 1.0
+                if stop > t:
+                    total += _edge_term(x, nx, poly[k, e], poly[k, e2], t, stop)
+                if a < n_iv:
+                    t = max(t, iv[a, 1])
+    return min(abs(total) / _TWO_PI, 1.0)
+
+
+@njit(cache=True, inline="always")
+def _inward(poly, n, f, sn):
+    """In-plane normal of edge f of the convex polygon poly[:n], pointing into it, and its length."""
+    f2 = f + 1 if f + 1 < n else 0
+    ex = poly[f2, 0] - poly[f, 0]
+    ey = poly[f2, 1] - poly[f, 1]
+    ez = poly[f2, 2] - poly[f, 2]
+    mx = sn[1] * ez - sn[2] * ey
+    my = sn[2] * ex - sn[0] * ez
+    mz = sn[0] * ey - sn[1] * ex
+    cx = 0.0
+    cy = 0.0
+    cz = 0.0
+    for v in range(n):
+        cx += poly[v, 0]
+        cy += poly[v, 1]
+        cz += poly[v, 2]
+    cx = cx / n - poly[f, 0]
+    cy = cy / n - poly[f, 1]
+    cz = cz / n - poly[f, 2]
+    if mx * cx + my * cy + mz * cz < 0:
+        mx, my, mz = -mx, -my, -mz
+    return mx, my, mz, math.sqrt(mx * mx + my * my + mz * mz)
+
+
+@njit(cache=True)
+def _covered_intervals(poly, count, n_polys, k, e, sn, eps, iv):
+    """Parameter intervals of edge e of polygon k lying inside the other polygons, into iv; their count."""
+    n = count[k]
+    e2 = e + 1 if e + 1 < n else 0
+    p = poly[k, e]
+    q = poly[k, e2]
+    kx, ky, kz, _ = _inward(poly[k], n, e, sn)
+    n_iv = 0
+    for m in range(n_polys):
+        if m == k or count[m] == 0:
+            continue
+        lo = 0.0
+        hi = 1.0
+        for f in range(count[m]):
+            mx, my, mz, ln = _inward(poly[m], count[m], f, sn)
+            if ln <= 0.0:
+                continue
+            a = poly[m, f]
+            h0 = (mx * (p[0] - a[0]) + my * (p[1] - a[1]) + mz * (p[2] - a[2])) / ln
+            h1 = (mx * (q[0] - a[0]) + my * (q[1] - a[1]) + mz * (q[2] - a[2])) / ln
+            if abs(h0) <= eps and abs(h1) <= eps:  # on this edge's line
+                if m < k and mx * kx + my * ky + mz * kz > 0:
+                    continue  # same side: the lower-numbered polygon's edge counts
+                hi = -1.0  # opposite sides (both kept, they cancel), or the other one counts
+                break
+            if h0 < 0.0 and h1 < 0.0:
+                hi = -1.0
+                break
+            if h0 < 0.0:
+                lo = max(lo, h0 / (h0 - h1))
+            elif h1 < 0.0:
+                hi = min(hi, h0 / (h0 - h1))
+            if lo >= hi:
+                break
+        if hi > lo:
+            iv[n_iv, 0] = lo
+            iv[n_iv, 1] = hi
+            n_iv += 1
+    return n_iv
+
+
 @njit(cache=True)
 def _union_factor(x, nx, hp, hn, n_polys, sn, levels, lcount, nxt, sa, sb):
-    """Form factor from x to the union of the convex polygons hp[k, :hn[k]] (one plane), k < n_polys.
+    """Form factor from x to the union of the convex polygons hp[k, :hn[k]] (one plane), k < n_polys."""
+    if n_polys > IE_MAX_POLYGONS:
+        return _union_factor_edges(x, nx, hp, hn, n_polys, sn, levels, lcount, sa)
+    return _union_factor_ie(x, nx, hp, hn, n_polys, sn, levels, lcount, nxt, sa, sb)
 
-    Inclusion-exclusion over the intersections (convex polygons), depth first; a branch stops
-    where the intersection is empty or out of x's sight (its subsets add nothing either).
-    """
+
+@njit(cache=True)
+def _union_factor_ie(x, nx, hp, hn, n_polys, sn, levels, lcount, nxt, sa, sb):
+    """:func:`_union_factor` by inclusion-exclusion over the intersections (convex polygons), depth
+    first; a branch stops where the intersection is empty or out of x's sight (its subsets add
+    nothing either)."""
     total = 0.0
     top = 0
     nxt[0] = 0
