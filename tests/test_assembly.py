@@ -251,9 +251,9 @@ def test_facing_pairs_loop_matches_numpy():
         np.testing.assert_array_equal(got, ref)
 
 
-def test_pairs_behind_many_occluders_keep_the_fixed_points(monkeypatch):
+def test_pairs_behind_many_occluders_skip_the_cells(monkeypatch):
     """The cells serve pairs with at most MAX_CELL_OCCLUDERS possible occluders; past that (a room
-    full of boxes, where the cells cost minutes) the fill is the fixed-point one, entry for entry."""
+    full of boxes, where the cells cost minutes) the fill takes the adaptive receiver squares."""
     import radiosity.visibility._constants as constants
 
     quads, groups = boxes_scene()
@@ -261,15 +261,20 @@ def test_pairs_behind_many_occluders_keep_the_fixed_points(monkeypatch):
     centroid, area = centroids_and_areas(quads)
     tight = FillSettings(near_order=3, far_separation=1e9, visibility="exact", visibility_samples=2,
                          visibility_max_samples=4, visibility_rtol=1e-6, formfactor_rtol=1e-6)
-    loose = FillSettings(near_order=3, far_separation=1e9, visibility="exact", visibility_samples=2,
-                         visibility_max_samples=4, visibility_rtol=1e-3, formfactor_rtol=1e-6)
+    vis = Visibility(quads, normals, groups, 1.8, samples=2, max_samples=4)
+    reference = assemble(quads, normals, centroid, area, vis, tight)[0].toarray()
 
-    def fill(settings):
-        vis = Visibility(quads, normals, groups, 1.8, samples=2, max_samples=4)
-        return assemble(quads, normals, centroid, area, vis, settings)[0].toarray()
+    def no_cells(*args, **kwargs):
+        raise AssertionError("a pair went to the cells")
 
     monkeypatch.setattr(constants, "MAX_CELL_OCCLUDERS", 0)  # no pair qualifies for the cells
-    np.testing.assert_array_equal(fill(tight), fill(loose))
+    monkeypatch.setattr(Visibility, "exact_hidden", no_cells)
+    F = assemble(quads, normals, centroid, area, vis, tight)[0].toarray()
+    assert np.isfinite(F).all() and (F >= 0).all()
+    # Both exact, but the squares integrate each pair over its smaller patch, and for 27 <- 89 an
+    # occluder lies close to that patch: 0.09798 where the cells (and reciprocity from 89's side,
+    # smooth there) give 0.09831. Which side to integrate is open (issue 12.4).
+    np.testing.assert_allclose(F, reference, atol=4e-4)
 
 
 def test_fill_settings_are_options_fields_with_options_defaults():

@@ -213,3 +213,29 @@ def test_cli_summary_prints_the_gaining_rows():
         type("S", (), {"summary": lambda self: summary})(), 0.0)
     summary["gain_beyond_tolerance"] = False  # within the fill's tolerance: not news
     assert "gaining" not in format_summary(type("S", (), {"summary": lambda self: summary})(), 0.0)
+
+
+def test_a_penumbra_between_the_receivers_points_is_found():
+    """An outer cap 0.4 m above the inner prism's cap sees a source cap 4.8 m below through a
+    penumbra 4% of its width, just inside the inner cap's rim: every point of the adaptive squares
+    down to 6 levels was lit or in full shadow, and F(cap -> cap) came out 3.0% low (0.0019943 for
+    0.0020568); only the source side, integrated the other way, was right."""
+    pad = lambda p: np.vstack([p, p[-1:]]) if len(p) == 3 else p  # noqa: E731 - quads for Visibility
+    inner = prism(0.5, 4.0, RING, inward=False)
+    outer = prism(1.0, 4.8, RING, inward=True, z0=-0.4)
+    quads = np.array([pad(p) for p in inner + outer])
+    top, bottom = len(inner) + 27, len(inner) + 15  # facing down at z = 4.4, up at z = -0.4
+    vis = make_vis(quads)
+    i, j = np.array([top, bottom]), np.array([bottom, top])
+    status, rows, occ = vis.classify(i, j)
+    assert (status == radiosity.visibility.MAYBE).all()
+    normals = radiosity.geometry.polygon_normals(quads)
+    centroid, area = radiosity.geometry.centroids_and_areas(quads)
+    unocc = radiosity.formfactors.pair_factors(quads, normals, centroid, area, i, j, rtol=1e-10)
+    assert area[top] == pytest.approx(area[bottom], rel=1e-12)  # so F(top -> bottom) = F(bottom -> top)
+    reference = unocc * vis.fraction(i, j, exact=True, order=64)
+    assert reference[0] == pytest.approx(reference[1], rel=3e-4)
+    seen = unocc - vis.adaptive_hidden(i, j, rows, occ, 1e-7, penumbra_depth=3)
+    np.testing.assert_allclose(seen, reference.mean(), rtol=5e-4)
+    blind = unocc - vis.adaptive_hidden(i, j, rows, occ, 1e-7)
+    assert blind[0] < 0.98 * reference.mean()  # without the test the receiver side misses it

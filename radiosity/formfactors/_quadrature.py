@@ -103,6 +103,13 @@ def square_cell_points(quads: np.ndarray, u0: np.ndarray, v0: np.ndarray, size: 
     return points, jac * wuv
 
 
+def square_cell_corners(quads: np.ndarray, u0: np.ndarray, v0: np.ndarray, size: np.ndarray) -> np.ndarray:
+    """(n, 4, 3) corners of the parameter squares of :func:`square_cell_points`, in the patches' order."""
+    u = u0[:, None] + size[:, None] * np.array([0.0, 1.0, 1.0, 0.0])[None, :]
+    v = v0[:, None] + size[:, None] * np.array([0.0, 0.0, 1.0, 1.0])[None, :]
+    return _map_square(quads, u, v)[0]
+
+
 def _map_square(quads: np.ndarray, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Points and area Jacobian of each patch's bilinear (or collapsed) map at (u, v).
 

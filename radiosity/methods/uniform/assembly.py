@@ -155,7 +155,7 @@ def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettin
     """
     from ...visibility import FULL, MAYBE
     from ...visibility._constants import (MAX_CELL_OCCLUDERS, SHADOW_ATOL_SHARE, SHADOW_CELL_ORDER,
-                                          SHADOW_CELLS_BELOW, SHADOW_RTOL_SHARE)
+                                          SHADOW_CELLS_BELOW, SHADOW_PENUMBRA_DEPTH, SHADOW_RTOL_SHARE)
 
     if visibility.cull and visibility.n_occluders == 0:  # nothing can block: every pair is free
         return
@@ -221,7 +221,8 @@ def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettin
             # each pair to the tighter of visibility_atol and formfactor_rtol, both as absolute
             # errors (relative to each pair's factor, the 50-box furnace took over 10 min, not 6)
             atol = SHADOW_ATOL_SHARE * min(settings.visibility_rtol, settings.formfactor_rtol)
-            hidden = visibility.adaptive_hidden(pi[sel], pj[sel], *subset(sel), atol, order=SHADOW_CELL_ORDER)
+            hidden = visibility.adaptive_hidden(pi[sel], pj[sel], *subset(sel), atol, order=SHADOW_CELL_ORDER,
+                                                penumbra_depth=SHADOW_PENUMBRA_DEPTH if tight else 0)
             frac[sel] = _seen_fraction(unocc, hidden)
     f[nz[part]] *= frac
 
