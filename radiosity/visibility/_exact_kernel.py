@@ -112,22 +112,26 @@ def _thinner_than(poly, n, tol):
     return area <= tol * longest
 
 
+@njit(cache=True, inline="always")
+def _mean_vertex(poly, n):
+    """Mean of the vertices poly[:n] (a point inside a convex polygon)."""
+    cx = 0.0
+    cy = 0.0
+    cz = 0.0
+    for v in range(n):
+        cx += poly[v, 0]
+        cy += poly[v, 1]
+        cz += poly[v, 2]
+    return cx / n, cy / n, cz / n
+
+
 @njit(cache=True)
 def _hidden_polygon(xr, src, ns, sn, occ, ms, on, tol, a, b, s1, s2):
     """Part of the source src[:ns] hidden from xr by the convex occluder occ[:ms], into s1.
 
     Returns its vertex count (0: nothing hidden). a, b: scratch (ms + 3, 3); s1, s2: (ns + ms + 3, 3).
     """
-    cx = 0.0
-    cy = 0.0
-    cz = 0.0
-    for k in range(ns):
-        cx += src[k, 0]
-        cy += src[k, 1]
-        cz += src[k, 2]
-    cx /= ns
-    cy /= ns
-    cz /= ns
+    cx, cy, cz = _mean_vertex(src, ns)
     side = (xr[0] - cx) * sn[0] + (xr[1] - cy) * sn[1] + (xr[2] - cz) * sn[2]
     flip = -1.0 if side < 0 else 1.0
     px, py, pz = sn[0] * flip, sn[1] * flip, sn[2] * flip
@@ -135,16 +139,7 @@ def _hidden_polygon(xr, src, ns, sn, occ, ms, on, tol, a, b, s1, s2):
     if dx <= tol:
         return 0
     # apex in the occluder's plane: the cone is flat
-    ox = 0.0
-    oy = 0.0
-    oz = 0.0
-    for k in range(ms):
-        ox += occ[k, 0]
-        oy += occ[k, 1]
-        oz += occ[k, 2]
-    ox /= ms
-    oy /= ms
-    oz /= ms
+    ox, oy, oz = _mean_vertex(occ, ms)
     if abs((xr[0] - ox) * on[0] + (xr[1] - oy) * on[1] + (xr[2] - oz) * on[2]) <= tol:
         return 0
     off = -(px * cx + py * cy + pz * cz)
@@ -359,17 +354,8 @@ def _inward(poly, n, f, sn):
     mx = sn[1] * ez - sn[2] * ey
     my = sn[2] * ex - sn[0] * ez
     mz = sn[0] * ey - sn[1] * ex
-    cx = 0.0
-    cy = 0.0
-    cz = 0.0
-    for v in range(n):
-        cx += poly[v, 0]
-        cy += poly[v, 1]
-        cz += poly[v, 2]
-    cx = cx / n - poly[f, 0]
-    cy = cy / n - poly[f, 1]
-    cz = cz / n - poly[f, 2]
-    if mx * cx + my * cy + mz * cz < 0:
+    cx, cy, cz = _mean_vertex(poly, n)
+    if mx * (cx - poly[f, 0]) + my * (cy - poly[f, 1]) + mz * (cz - poly[f, 2]) < 0:
         mx, my, mz = -mx, -my, -mz
     return mx, my, mz, math.sqrt(mx * mx + my * my + mz * mz)
 
