@@ -408,9 +408,10 @@ class Visibility:
 
         The mean over receiver i of F(x -> part of j hidden from x), integrated on squares of
         i's parameter domain: a square is split in four while its ``order**2``-point rule and its
-        four children's disagree by more than ``atol`` times its share of i's area, so the
-        pair's error is about ``atol`` (absolute, in form-factor units) wherever the shadow's
-        edges fall. A fixed rule smears an edge across the patch (a plate with a centred
+        four children's disagree by more than ``atol`` times i's area times the square's side
+        (1 for the whole patch), so the squares along a shadow's edge, the only ones that do
+        not converge fast, sum to about ``atol`` (absolute, in form-factor units) per patch
+        length of edge. A fixed rule smears an edge across the patch (a plate with a centred
         blocker erred by 9%; a closed room of boxes had rows 1.7e-3 from 1); the refinement
         spends points only along the edges. ``rows``/``occ`` list each pair's possible
         occluders (:meth:`classify`); ``atol`` is one tolerance or one per pair. The obstructed
@@ -443,7 +444,11 @@ class Visibility:
             corner4 = np.repeat(corner, 4, axis=0) + np.tile(offsets, (len(pair), 1)) * np.repeat(size, 4)[:, None]
             child, child_area, child_state = self._cell_hidden(i, j, lists, pair4, corner4, size4, order)
             fine = child.reshape(-1, 4).sum(axis=1)
-            done = np.abs(fine - coarse) <= atol[pair] * area
+            # the square's share of the pair's tolerance follows its side, not its area: a square
+            # across a shadow's edge keeps a fixed relative error however small it gets, so an
+            # area share split every such square to max_depth (the Cornell box at fine: 787 s,
+            # not 24 s); by side, the squares along an edge of the patch's length sum to about atol
+            done = np.abs(fine - coarse) <= atol[pair] * patch_area[pair] * size
             if depth < min(penumbra_depth, max_depth - 1):
                 # points all lit (or all in shadow) agree whatever passes between them: such a
                 # square is done only if no occluder can shadow part of it
