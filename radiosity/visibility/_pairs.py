@@ -31,7 +31,7 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from .. import _tol
-from ..geometry import polygon_normals
+from ..geometry import centroids_and_areas, polygon_normals
 from ..formfactors import patch_points, square_cell_corners, square_cell_points
 from . import _occluders
 from ._constants import (CELL_FALLBACK_ATOL, CHUNK_CELL_PAIRS, CHUNK_CLASSIFY, CHUNK_SHADOWS, MAX_UNION,
@@ -205,6 +205,7 @@ class Visibility:
         self._lo = quads.min(axis=1)
         self._hi = quads.max(axis=1)
         self._tracer = None
+        self._width = None  # sqrt(patch area), for receive_on_source
         self.n_rays = 0
         self.n_exact_rows = 0
         self.n_closed_culled = 0  # (pair, occluder) rows left out by closed-object culling
@@ -465,6 +466,33 @@ class Visibility:
             if not len(pair):
                 break
         return np.where(patch_area > 0, hidden / np.where(patch_area > 0, patch_area, 1.0), 0.0)
+
+    def receive_on_source(self, i: np.ndarray, j: np.ndarray, rows: np.ndarray, occ: np.ndarray) -> np.ndarray:
+        """(m,) bool: where pair (i, j)'s shadow is smoother integrated over j than over i.
+
+        An occluder's penumbra on a receiver r is about w_s d_r / d_s wide (w: patch size, d: the
+        patch's distance to the occluder), sharp where r touches it and slow for the squares of
+        :meth:`adaptive_hidden` to resolve; relative to r's own size it is widest on the patch
+        with the larger d / w. So j receives where its nearest possible occluder is farther, in
+        units of its size, than i's. (A box on the floor: from the floor patch beside it the
+        hidden factor to a wall patch came out 0.3% low, 0.09798 for 0.09831, at any depth.)
+        """
+        if self._width is None:
+            self._width = np.sqrt(centroids_and_areas(self.quads)[1])
+        o = self.occluders
+
+        def nearest(patch):
+            """Gap between the boxes of each pair's patch and its nearest possible occluder in
+            front of it (one behind its plane, such as a box's next face, shadows nothing there)."""
+            p = patch[rows]
+            gap = np.linalg.norm(np.maximum(np.maximum(o.lo[occ] - self._hi[p], self._lo[p] - o.hi[occ]), 0.0), axis=1)
+            height = np.einsum("rvc,rc->rv", o.polys[occ] - self.quads[p, :1], self.normals[p]).max(axis=1)
+            d = np.full(len(patch), np.inf)
+            np.minimum.at(d, rows, np.where(height > PLANE_REL * self.scale, gap, np.inf))
+            return d
+
+        d_i, d_j = nearest(np.asarray(i)), nearest(np.asarray(j))
+        return d_j * self._width[i] > d_i * self._width[j]
 
     def _penumbra_may_cross(self, i, j, lists, pair, corner, size) -> np.ndarray:
         """Whether some occluder of pair p may block part of receiver square (corner, size) from

@@ -146,7 +146,7 @@ def _classify_both_ways(f, i, j, visibility, half):
     return status, np.concatenate([rows, rows + half]), np.concatenate([occ, occ])
 
 
-def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettings, stats: FillStats, *,
+def _apply_visibility(f, quads, centroid, area, i, j, visibility, settings: FillSettings, stats: FillStats, *,
                       half: int | None = None) -> None:
     """Multiply the unoccluded factors f (in place) by each pair's visible fraction.
 
@@ -219,9 +219,15 @@ def _apply_visibility(f, quads, centroid, i, j, visibility, settings: FillSettin
             sel = np.flatnonzero(exact)
             unocc = f[nz[part[sel]]]
             atol = SHADOW_ATOL_SHARE * _shadow_atol(settings)
-            hidden = visibility.adaptive_hidden(pi[sel], pj[sel], *subset(sel), atol, order=SHADOW_CELL_ORDER,
+            sub_rows, sub_occ = subset(sel)
+            # integrated over the patch where the shadow is smoother; from j, the error of
+            # F(i -> j) = A_j F(j -> i) / A_i grows by A_j / A_i, so j's target shrinks by it
+            flip = visibility.receive_on_source(pi[sel], pj[sel], sub_rows, sub_occ)
+            ratio = np.where(flip, area[pj[sel]] / area[pi[sel]], 1.0)
+            hidden = visibility.adaptive_hidden(np.where(flip, pj[sel], pi[sel]), np.where(flip, pi[sel], pj[sel]),
+                                                sub_rows, sub_occ, atol / ratio, order=SHADOW_CELL_ORDER,
                                                 penumbra_depth=SHADOW_PENUMBRA_DEPTH if tight else 0)
-            frac[sel] = _seen_fraction(unocc, hidden)
+            frac[sel] = _seen_fraction(unocc, hidden * ratio)
     f[nz[part]] *= frac
 
 
@@ -291,7 +297,7 @@ def fill_block(quads, normals, centroid, area, visibility, settings: FillSetting
     t1 = time.perf_counter()
     stats.seconds_formfactors += t1 - t0
     if visibility is not None:
-        _apply_visibility(f, quads, centroid, i, j, visibility, settings, stats)
+        _apply_visibility(f, quads, centroid, area, i, j, visibility, settings, stats)
         for name in ("n_traced_pairs", "n_blocked_pairs", "n_exact_pairs"):  # the mirrors share the status
             setattr(stats, name, 2 * getattr(stats, name))
         stats.seconds_visibility += time.perf_counter() - t1
