@@ -62,13 +62,14 @@ class Options:
         Sample points per direction on each patch of a pair that may be blocked, first round
         (``visibility_samples**4`` rays per pair).
     visibility : {"auto", "rays", "exact"}
-        Partly occluded pairs: adaptive stratified rays, exact shadow clipping, or exact only
-        where rays would likely miss by more than ``visibility_atol``.
+        Partly occluded pairs: adaptive stratified rays, exact shadow clipping, or exact for
+        pairs behind at most 32 possible occluders and where rays would likely miss by more
+        than ``visibility_atol`` (rays for small pairs behind many occluders).
     visibility_max_samples : int
         Points per direction on each patch for pairs whose first-round rays disagree.
     visibility_atol : float
-        Absolute error per view factor that ``"auto"`` accepts from rays (old name
-        ``visibility_rtol``, deprecated).
+        Absolute error per view factor: what ``"auto"`` accepts from rays, and 10x what the
+        adaptive exact shadows of ``"auto"`` aim at (old name ``visibility_rtol``, deprecated).
     formfactor_rtol : float
         Relative accuracy of each unoccluded form factor (adaptive quadrature per pair).
     solver : {"auto", "direct", "bicgstab", "gmres", "jacobi", "gauss-seidel", "progressive"}

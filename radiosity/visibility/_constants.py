@@ -34,6 +34,10 @@ CHUNK_SHADOWS = 100_000
 # more go to shapely. 10 while inclusion-exclusion did it all: 12-sided concentric prisms sent
 # points with ~20 to shapely, and their 72-patch view factors took 100 s instead of 33 s.
 MAX_UNION = 32
+# "auto" visibility sends a partly occluded pair to exact shadows whatever its factor when it
+# has at most this many possible occluders (no receiver point can need shapely), else only if
+# rays would likely miss by more than visibility_atol (methods.uniform.assembly).
+AUTO_EXACT_OCCLUDERS = MAX_UNION
 
 # The same for the shadow-aligned cells, whose pairs fall back to fixed points past it: in a
 # room full of boxes a point sees the three faces of each of several boxes hide overlapping
