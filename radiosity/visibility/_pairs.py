@@ -474,8 +474,9 @@ class Visibility:
         patch's distance to the occluder), sharp where r touches it and slow for the squares of
         :meth:`adaptive_hidden` to resolve; relative to r's own size it is widest on the patch
         with the larger d / w. So j receives where its nearest possible occluder is farther, in
-        units of its size, than i's. (A box on the floor: from the floor patch beside it the
-        hidden factor to a wall patch came out 0.3% low, 0.09798 for 0.09831, at any depth.)
+        units of its size, than i's. (A floor patch straddling the foot of a box's wall: on its
+        own squares F to a face of the next box came out 0.03529 for 0.02771, 27% high; from
+        that face, 0.1 m from the wall, 0.0277089.)
         """
         if self._width is None:
             self._width = np.sqrt(centroids_and_areas(self.quads)[1])
