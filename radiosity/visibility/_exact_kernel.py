@@ -150,16 +150,10 @@ def _hidden_polygon(xr, src, ns, sn, occ, ms, on, tol, a, b, s1, s2):
         # at x's own depth) leaves a sliver of round-off width: its cone from x is flat, but
         # the planes through x and its edges are arbitrary and can cut away the whole source.
         return 0
-    ix = 0.0
-    iy = 0.0
-    iz = 0.0
-    for k in range(n2):
-        ix += b[k, 0]
-        iy += b[k, 1]
-        iz += b[k, 2]
-    ix = ix / n2 - xr[0]
-    iy = iy / n2 - xr[1]
-    iz = iz / n2 - xr[2]
+    ix, iy, iz = _mean_vertex(b, n2)
+    ix = ix - xr[0]
+    iy = iy - xr[1]
+    iz = iz - xr[2]
     # source into s1
     for k in range(ns):
         s1[k, 0] = src[k, 0]

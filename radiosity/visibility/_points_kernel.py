@@ -16,7 +16,7 @@ from numba import njit, prange
 # numba's disk cache of this module's kernels holds the _exact_kernel helpers compiled in (and
 # the _geometry_kernels ones they inline), and is keyed on this file alone: a change there must
 # touch this file too, or stale code runs.
-from ._exact_kernel import _crossing_status, _edge_offsets, _lambert, _next_occluder, _point_hidden
+from ._exact_kernel import _crossing_status, _edge_offsets, _lambert, _mean_vertex, _next_occluder, _point_hidden
 
 
 @njit(cache=True, inline="always")
@@ -35,14 +35,8 @@ def _cap(x, poly, n, cap):
     """Spherical cap from x containing the directions to polygon poly[:n]: cap = (direction (3),
     cos, sin of its angular radius). A radius of 90 degrees or more (or x on the polygon) is
     stored as cos = -2: such a cap culls nothing, because only caps under a hemisphere are convex."""
-    m0 = 0.0
-    m1 = 0.0
-    m2 = 0.0
-    for v in range(n):
-        m0 += poly[v, 0]
-        m1 += poly[v, 1]
-        m2 += poly[v, 2]
-    d0, d1, d2 = m0 / n - x[0], m1 / n - x[1], m2 / n - x[2]
+    m0, m1, m2 = _mean_vertex(poly, n)
+    d0, d1, d2 = m0 - x[0], m1 - x[1], m2 - x[2]
     dn = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
     cap[3] = -2.0
     if dn == 0.0:

@@ -228,9 +228,10 @@ def _apply_visibility(f, quads, centroid, area, i, j, visibility, settings: Fill
             sub_rows, sub_occ = subset(sel)
             # integrated over the patch where the shadow is smoother; from j, the error of
             # F(i -> j) = A_j F(j -> i) / A_i grows by A_j / A_i, so j's target shrinks by it
-            flip = visibility.receive_on_source(pi[sel], pj[sel], sub_rows, sub_occ) & (area[pi[sel]] > 0)
-            ratio = np.where(flip, area[pj[sel]] / area[pi[sel]], 1.0)
-            hidden = visibility.adaptive_hidden(np.where(flip, pj[sel], pi[sel]), np.where(flip, pi[sel], pj[sel]),
+            ri, rj = pi[sel], pj[sel]
+            flip = visibility.receive_on_source(ri, rj, sub_rows, sub_occ) & (area[ri] > 0)
+            ratio = np.where(flip, area[rj] / area[ri], 1.0)
+            hidden = visibility.adaptive_hidden(np.where(flip, rj, ri), np.where(flip, ri, rj),
                                                 sub_rows, sub_occ, atol / ratio, order=SHADOW_CELL_ORDER,
                                                 penumbra_depth=SHADOW_PENUMBRA_DEPTH if tight else 0)
             frac[sel] = _seen_fraction(unocc, hidden * ratio)
