@@ -234,16 +234,7 @@ _EDGE_REL = 1e-9
 @njit(cache=True)
 def _intersect(pa, na, pb, nb, sn, out, sa, sb):
     """Convex pa[:na] intersected with convex pb[:nb] (both in the plane with normal sn), into out."""
-    bx = 0.0
-    by = 0.0
-    bz = 0.0
-    for k in range(nb):
-        bx += pb[k, 0]
-        by += pb[k, 1]
-        bz += pb[k, 2]
-    bx /= nb
-    by /= nb
-    bz /= nb
+    bx, by, bz = _mean_vertex(pb, nb)
     size = 0.0
     for k in range(nb):
         size = max(size, abs(pb[k, 0] - bx) + abs(pb[k, 1] - by) + abs(pb[k, 2] - bz))
