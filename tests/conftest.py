@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import pytest
 
@@ -16,16 +20,58 @@ settings.register_profile("thorough", deadline=None, max_examples=500)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "deterministic"))
 
 
+def pytest_configure(config):
+    """Under xdist, compile the numba kernels before the workers start (``warm_kernels.py``)."""
+    if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
+        return  # a worker, or a single process that compiles as it goes
+    if os.environ.get("RADIOSITY_TEST_WARMUP", "1") == "0":
+        return
+    from radiosity._kernels import kernels_on_disk
+
+    if kernels_on_disk():
+        config.stash[_WARMUP] = "numba kernels on disk already"
+        return
+    config.stash[_WARMUP] = _warm_kernels()
+
+
+_WARMUP = pytest.StashKey[str]()
+_ROOT = Path(__file__).resolve().parents[1]
+
+
+def _warm_kernels() -> str:
+    """Run warm_kernels.py's shares, a phase at a time; a failure is reported, not raised (the
+    tests then compile what is missing themselves and fail where the fault is)."""
+    from warm_kernels import PHASES
+
+    # the tests import radiosity from the checkout, so the cache must be written for its files
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(_ROOT), os.environ.get("PYTHONPATH")])))
+    script = Path(__file__).with_name("warm_kernels.py")
+    start = time.perf_counter()
+    failed = []
+    for phase in PHASES:
+        runs = {share: subprocess.Popen([sys.executable, str(script), share], cwd=_ROOT, env=env,
+                                        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+                for share in phase}
+        for share, run in runs.items():
+            _, err = run.communicate()
+            if run.returncode:
+                last = err.strip().splitlines()[-1:] or [f"exit {run.returncode}"]
+                failed.append(f"{share}: {last[0]}")
+    took = f"numba kernels compiled up front in {time.perf_counter() - start:.0f} s"
+    return took + (f" (failed: {'; '.join(failed)})" if failed else "")
+
+
 def pytest_report_header(config):
     import importlib.metadata as md
 
+    lines = [config.stash[_WARMUP]] if _WARMUP in config.stash else []
     parts = []
     for name in ("numpy", "scipy", "trimesh", "embreex", "pyvista", "numba"):
         try:
             parts.append(f"{name} {md.version(name)}")
         except md.PackageNotFoundError:
             parts.append(f"{name} missing")
-    return "radiosity deps: " + ", ".join(parts)
+    return ["radiosity deps: " + ", ".join(parts), *lines]
 
 
 @pytest.fixture(scope="session", autouse=True)
