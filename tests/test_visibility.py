@@ -250,3 +250,46 @@ def test_exact_fraction_falls_back_to_shapely_unions(monkeypatch):
     assert sum(united) > 100
     assert 0 < compiled.mean() < 1
     np.testing.assert_allclose(fallback, compiled, rtol=1e-9, atol=1e-12)
+
+
+def _random_quad(rng, center, size):
+    """A random planar convex quad (a rotated, sheared rectangle) around center."""
+    basis, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    u, v = basis[:, 0] * size * rng.uniform(0.2, 1), basis[:, 1] * size * rng.uniform(0.2, 1)
+    v = v + rng.uniform(-0.5, 0.5) * u
+    return np.array([center - u - v, center + u - v, center + u + v, center - u + v])
+
+
+def _normal(quad):
+    n = np.cross(quad[2] - quad[0], quad[3] - quad[1])
+    return n / np.linalg.norm(n)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_occluders_outside_the_cone_are_skipped_without_changing_the_factor(seed):
+    """``_point_hidden`` skips occluders wholly outside one plane of the cone from x over the
+    source. One occluder per point: the kernel (with the test) equals the clipped polygon's
+    factor (``hidden_rows``, without it), for random quads anywhere, including occluders whose
+    edge lies in a cone plane and occluders across x's own plane."""
+    from radiosity.visibility._exact import hidden_factors
+    from radiosity.visibility._exact_kernel import hidden_rows
+
+    rng = np.random.default_rng(seed)
+    n = 400
+    source = np.array([_random_quad(rng, rng.uniform(-1, 1, 3), 1.0) for _ in range(n)])
+    sn = np.array([_normal(q) for q in source])
+    x = rng.uniform(-2, 2, (n, 3))
+    nx = rng.normal(size=(n, 3))
+    nx /= np.linalg.norm(nx, axis=1)[:, None]
+    t = rng.uniform(0.05, 0.95, (n, 1))
+    occluder = np.array([_random_quad(rng, c, rng.uniform(0.05, 1.0)) for c in x + t * (source.mean(axis=1) - x)])
+    # a quarter of them with an edge along the ray from x to a source vertex (in a cone plane)
+    edge = slice(0, n // 4)
+    occluder[edge, 0] = x[edge] + t[edge] * (source[edge, 0] - x[edge])
+    occluder[edge, 1] = x[edge] + t[edge] * (source[edge, 1] - x[edge])
+    on = np.array([_normal(q) for q in occluder])
+    got = hidden_factors(x, nx, np.arange(n), source, sn, occluder, on, 1e-9)
+    want, _, _ = hidden_rows(x, nx, source, sn, occluder, on, 1e-9, False)
+    want = np.maximum(want, 0.0)  # a point's hidden factor counts only what it sees
+    assert n // 4 < (want > 0).sum() < n - n // 10  # the draw hides something often, not always
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)

@@ -186,16 +186,38 @@ def closed_cull(quads: np.ndarray, i: np.ndarray, j: np.ndarray, rows: np.ndarra
     li, lj = labels[pi, c], labels[pj, c]
     same = (li == lj) & (li != NO_LABEL)
     cand, c, pi, pj = cand[same], c[same], pi[same], pj[same]
-    k = occ[cand]
-
-    def behind(p):  # all of patch p behind the face's plane, or in it
-        height = np.einsum("tvc,tc->tv", quads[p] - occluders.center[k][:, None, :], occluders.normal[k])
-        return (front[cand][:, None] * height).max(axis=1) <= tol
-
     # either end may play the source, as long as it is the same one for all of S's faces in the
     # pair: take the one that drops more of them
-    by_j, by_i = behind(pj), behind(pi)
+    by_i, by_j = _behind_kernel(np.ascontiguousarray(quads, dtype=np.float64), pi.astype(np.int64), pj.astype(np.int64),
+                                occ[cand].astype(np.int64),
+                                np.ascontiguousarray(occluders.center, dtype=np.float64),
+                                np.ascontiguousarray(occluders.normal, dtype=np.float64),
+                                np.ascontiguousarray(front[cand], dtype=np.float64), float(tol))
     _, group = np.unique(rows[cand] * labels.shape[1] + c, return_inverse=True)
     use_i = np.bincount(group, by_i) > np.bincount(group, by_j)
     keep[cand[np.where(use_i[group], by_i, by_j)]] = False
     return keep
+
+
+@njit(cache=True, parallel=True)
+def _behind_kernel(quads, pi, pj, k, center, normal, front, tol):
+    """(t,) bool twice: all of patch pi[t] (pj[t]) behind face k[t]'s plane, or in it; front[t]
+    (+1 or -1) says which side of the plane is its front (compiled: the numpy version's (t, 4, 3)
+    temporaries took 5 s of a 1,752-patch furnace's 42)."""
+    t = len(k)
+    by_i = np.empty(t, np.bool_)
+    by_j = np.empty(t, np.bool_)
+    for r in prange(t):
+        by_i[r] = _all_behind(quads[pi[r]], center[k[r]], normal[k[r]], front[r], tol)
+        by_j[r] = _all_behind(quads[pj[r]], center[k[r]], normal[k[r]], front[r], tol)
+    return by_i, by_j
+
+
+@njit(cache=True, inline="always")
+def _all_behind(quad, center, normal, front, tol):
+    for v in range(quad.shape[0]):
+        height = ((quad[v, 0] - center[0]) * normal[0] + (quad[v, 1] - center[1]) * normal[1]
+                  + (quad[v, 2] - center[2]) * normal[2])
+        if front * height > tol:
+            return False
+    return True

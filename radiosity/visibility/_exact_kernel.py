@@ -429,6 +429,68 @@ def _union_factor_ie(x, nx, hp, hn, n_polys, sn, levels, lcount, nxt, sa, sb):
     return max(total, 0.0)
 
 
+# Relative margin of the cone tests (:func:`_cone_planes`, :func:`_outside_cone`): a vertex this close to a cone plane
+# counts as touching it, so only occluders clearly apart from the cone are skipped.
+_CONE_MARGIN = 1e-9
+
+
+@njit(cache=True, inline="always")
+def _cone_planes(x, src, ns, planes):
+    """Into planes[:ns], the inward normals of the planes through x and each edge of the convex
+    source src[:ns] (zero, meaning no test, where round-off would pick the direction)."""
+    cx, cy, cz = _mean_vertex(src, ns)
+    for k in range(ns):
+        k2 = k + 1 if k + 1 < ns else 0
+        ux = src[k, 0] - x[0]
+        uy = src[k, 1] - x[1]
+        uz = src[k, 2] - x[2]
+        vx = src[k2, 0] - x[0]
+        vy = src[k2, 1] - x[1]
+        vz = src[k2, 2] - x[2]
+        mx = uy * vz - uz * vy
+        my = uz * vx - ux * vz
+        mz = ux * vy - uy * vx
+        norm = math.sqrt(mx * mx + my * my + mz * mz)
+        wx = cx - x[0]
+        wy = cy - x[1]
+        wz = cz - x[2]
+        inward = mx * wx + my * wy + mz * wz
+        if norm <= _CONE_MARGIN * math.sqrt((ux * ux + uy * uy + uz * uz) * (vx * vx + vy * vy + vz * vz)) or \
+                abs(inward) <= _CONE_MARGIN * norm * math.sqrt(wx * wx + wy * wy + wz * wz):
+            mx = my = mz = 0.0  # a short edge or a flat cone: the plane's direction is round-off
+        elif inward < 0:
+            mx, my, mz = -mx, -my, -mz
+        planes[k, 0] = mx
+        planes[k, 1] = my
+        planes[k, 2] = mz
+
+
+@njit(cache=True, inline="always")
+def _outside_cone(x, occ, ms, planes, ns):
+    """True if the occluder occ[:ms] lies wholly outside one plane of the cone from x over the
+    source (:func:`_cone_planes`): then it hides nothing from x, and the clipping of
+    :func:`_hidden_polygon` is skipped. The cone (the convex hull of x and the source) lies
+    inside each plane, so a convex occluder outside one misses it."""
+    for k in range(ns):
+        mx = planes[k, 0]
+        my = planes[k, 1]
+        mz = planes[k, 2]
+        norm = math.sqrt(mx * mx + my * my + mz * mz)
+        if norm == 0.0:
+            continue
+        outside = True
+        for v in range(ms):
+            dx = occ[v, 0] - x[0]
+            dy = occ[v, 1] - x[1]
+            dz = occ[v, 2] - x[2]
+            if mx * dx + my * dy + mz * dz >= -_CONE_MARGIN * norm * math.sqrt(dx * dx + dy * dy + dz * dz):
+                outside = False
+                break
+        if outside:
+            return True
+    return False
+
+
 @njit(cache=True)
 def _point_hidden(x, nx, src, sn, occ, t0, t1, opolys, onormal, tol, max_union, a, b, s1, s2, hp, hn, levels,
                   lcount, nxt, sa, sb):
@@ -439,10 +501,13 @@ def _point_hidden(x, nx, src, sn, occ, t0, t1, opolys, onormal, tol, max_union, 
     """
     ms = opolys.shape[1]
     ns = src.shape[0]
+    _cone_planes(x, src, ns, sa)
     count = 0
     single = 0.0
     for t in range(t0, t1):
         k = occ[t]
+        if _outside_cone(x, opolys[k], ms, sa, ns):
+            continue
         m = _hidden_polygon(x, src, ns, sn, opolys[k], ms, onormal[k], tol, a, b, s1, s2)
         if m < 3:
             continue
