@@ -62,9 +62,10 @@ class Options:
         Sample points per direction on each patch of a pair that may be blocked, first round
         (``visibility_samples**4`` rays per pair).
     visibility : {"auto", "rays", "exact"}
-        Partly occluded pairs: adaptive stratified rays, exact shadow clipping, or exact for
-        pairs behind at most 32 possible occluders and where rays would likely miss by more
-        than ``visibility_atol`` (rays for small pairs behind many occluders).
+        Partly occluded pairs: adaptive stratified rays, exact shadow clipping, or exact where
+        rays would likely miss by more than ``visibility_atol`` and, when ``visibility_atol`` is
+        below 1e-3 (not at draft), for every pair behind at most 32 possible occluders (rays
+        for small pairs behind many occluders).
     visibility_max_samples : int
         Points per direction on each patch for pairs whose first-round rays disagree.
     visibility_atol : float

@@ -154,9 +154,9 @@ def _apply_visibility(f, quads, centroid, area, i, j, visibility, settings: Fill
     classified once for both.
     """
     from ...visibility import FULL, MAYBE
-    from ...visibility._constants import (AUTO_EXACT_OCCLUDERS, MAX_CELL_OCCLUDERS, SHADOW_ATOL_SHARE,
-                                          SHADOW_CELL_ORDER, SHADOW_CELLS_BELOW, SHADOW_PENUMBRA_DEPTH,
-                                          SHADOW_RTOL_SHARE)
+    from ...visibility._constants import (AUTO_EXACT_ATOL, AUTO_EXACT_OCCLUDERS, MAX_CELL_OCCLUDERS,
+                                          SHADOW_ATOL_SHARE, SHADOW_CELL_ORDER, SHADOW_CELLS_BELOW,
+                                          SHADOW_PENUMBRA_DEPTH, SHADOW_RTOL_SHARE)
 
     if visibility.cull and visibility.n_occluders == 0:  # nothing can block: every pair is free
         return
@@ -186,11 +186,13 @@ def _apply_visibility(f, quads, centroid, area, i, j, visibility, settings: Fill
     elif settings.visibility == "rays":
         exact = np.zeros(len(part), bool)
     else:
-        # rays for the small pairs behind many occluders only: where the compiled unions handle
-        # every receiver point, exact shadows cost little more and rays' early agreement missed
-        # small shadows (in a closed room of 50 boxes at default rows spread 0.99879-1.00155 with
-        # rays for F <= 4e-4, 0.99990-1.00015 with exact shadows everywhere, in 1.07x the time)
+        # below draft's tolerance, rays for the small pairs behind many occluders only: where the
+        # compiled unions handle every receiver point, exact shadows cost little more and rays'
+        # early agreement missed small shadows (in a closed room of 50 boxes at default rows
+        # spread 0.99879-1.00155 with rays for F <= 4e-4, 0.99990-1.00015 with exact shadows
+        # everywhere, in 1.07x the time)
         few = np.bincount(pair_of, minlength=len(part)) <= AUTO_EXACT_OCCLUDERS
+        few &= settings.visibility_rtol < AUTO_EXACT_ATOL
         exact = few | (f[nz[part]] / settings.visibility_max_samples > settings.visibility_rtol)
 
     def subset(sel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
