@@ -41,12 +41,14 @@ def run_cli(out: Path, cache: Path, *, interrupt_after: float | None = None,
 
 @pytest.mark.slow
 def test_signals_at_random_moments_end_cleanly(tmp_path):
-    cache = tmp_path / "cache"
     reference = tmp_path / "reference"
-    start = time.perf_counter()
-    done = run_cli(reference, cache)
-    duration = time.perf_counter() - start
-    assert done.returncode == 0, done.stderr
+    durations = []
+    for k in range(2):  # the first run may still load (or compile) kernels: time the faster one
+        start = time.perf_counter()
+        done = run_cli(reference, tmp_path / f"reference-cache{k}")
+        durations.append(time.perf_counter() - start)
+        assert done.returncode == 0, done.stderr
+    duration = min(durations)
     expected = json.loads((reference / "summary.json").read_text())["objects"]
 
     rng = np.random.default_rng(20261201)
