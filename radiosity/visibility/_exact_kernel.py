@@ -125,6 +125,19 @@ def _mean_vertex(poly, n):
     return cx / n, cy / n, cz / n
 
 
+@njit(cache=True, inline="always")
+def _apex_normal(x, p, q):
+    """u x v for u = p - x and v = q - x (the normal of the plane through x, p and q), |u|^2, |v|^2."""
+    ux = p[0] - x[0]
+    uy = p[1] - x[1]
+    uz = p[2] - x[2]
+    vx = q[0] - x[0]
+    vy = q[1] - x[1]
+    vz = q[2] - x[2]
+    return (uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx, ux * ux + uy * uy + uz * uz,
+            vx * vx + vy * vy + vz * vz)
+
+
 @njit(cache=True)
 def _hidden_polygon(xr, src, ns, sn, occ, ms, on, tol, a, b, s1, s2):
     """Part of the source src[:ns] hidden from xr by the convex occluder occ[:ms], into s1.
@@ -163,17 +176,8 @@ def _hidden_polygon(xr, src, ns, sn, occ, ms, on, tol, a, b, s1, s2):
     flat = True
     for e in range(n2):
         e2 = e + 1 if e + 1 < n2 else 0
-        ux = b[e, 0] - xr[0]
-        uy = b[e, 1] - xr[1]
-        uz = b[e, 2] - xr[2]
-        vx = b[e2, 0] - xr[0]
-        vy = b[e2, 1] - xr[1]
-        vz = b[e2, 2] - xr[2]
-        mx = uy * vz - uz * vy
-        my = uz * vx - ux * vz
-        mz = ux * vy - uy * vx
-        norm = math.sqrt(mx * mx + my * my + mz * mz)
-        if norm <= 1e-14 * (ux * ux + uy * uy + uz * uz + vx * vx + vy * vy + vz * vz):
+        mx, my, mz, uu, vv = _apex_normal(xr, b[e], b[e2])
+        if math.sqrt(mx * mx + my * my + mz * mz) <= 1e-14 * (uu + vv):
             continue  # zero-length edge
         if mx * ix + my * iy + mz * iz < 0:
             mx, my, mz = -mx, -my, -mz
@@ -439,23 +443,15 @@ def _cone_planes(x, src, ns, planes):
     """Into planes[:ns], the inward normals of the planes through x and each edge of the convex
     source src[:ns] (zero, meaning no test, where round-off would pick the direction)."""
     cx, cy, cz = _mean_vertex(src, ns)
+    wx = cx - x[0]
+    wy = cy - x[1]
+    wz = cz - x[2]
     for k in range(ns):
         k2 = k + 1 if k + 1 < ns else 0
-        ux = src[k, 0] - x[0]
-        uy = src[k, 1] - x[1]
-        uz = src[k, 2] - x[2]
-        vx = src[k2, 0] - x[0]
-        vy = src[k2, 1] - x[1]
-        vz = src[k2, 2] - x[2]
-        mx = uy * vz - uz * vy
-        my = uz * vx - ux * vz
-        mz = ux * vy - uy * vx
+        mx, my, mz, uu, vv = _apex_normal(x, src[k], src[k2])
         norm = math.sqrt(mx * mx + my * my + mz * mz)
-        wx = cx - x[0]
-        wy = cy - x[1]
-        wz = cz - x[2]
         inward = mx * wx + my * wy + mz * wz
-        if norm <= _CONE_MARGIN * math.sqrt((ux * ux + uy * uy + uz * uz) * (vx * vx + vy * vy + vz * vz)) or \
+        if norm <= _CONE_MARGIN * math.sqrt(uu * vv) or \
                 abs(inward) <= _CONE_MARGIN * norm * math.sqrt(wx * wx + wy * wy + wz * wz):
             mx = my = mz = 0.0  # a short edge or a flat cone: the plane's direction is round-off
         elif inward < 0:
