@@ -33,7 +33,7 @@ from .._geometry_kernels import newell_z
 # is keyed on this file alone: a change there must touch this file too, or stale code runs
 # (last: the walks, edge offsets and crossing loop moved into _next_occluder, _edge_offsets,
 # _crossing_status).
-from ._exact_kernel import _classify_one, _lambert, _point_hidden
+from ._exact_kernel import _classify_one, _lambert, _point_hidden, union_scratch
 
 # Event lines one pair may cut its receiver by, and the cells they may make.
 MAX_LINES = 128
@@ -480,12 +480,8 @@ def _cells_block(s, e, quads, normals, i, j, starts, occ, opolys, onormal, ocent
                  max_points, gn, gw, hidden, ok, n_points):
     ms = opolys.shape[1]
     ns = quads.shape[1]
-    cap = ns + ms + 3
-    lcap = 2 * (max_union + 1) * cap + 8
-    work = (np.empty((ms + 3, 3)), np.empty((ms + 3, 3)), np.empty((cap, 3)), np.empty((cap, 3)),
-            np.empty((max_union, cap, 3)), np.empty(max_union, np.int64), np.empty((max_union + 1, lcap, 3)),
-            np.empty(max_union + 1, np.int64), np.empty(max_union + 1, np.int64), np.empty((lcap + 2, 3)),
-            np.empty((lcap + 2, 3)), np.empty((MAX_LINES, 3)), np.empty((MAX_CELLS, _CELL_VERTICES, 2)),
+    work = union_scratch(ns, ms, max_union) + (
+            np.empty((MAX_LINES, 3)), np.empty((MAX_CELLS, _CELL_VERTICES, 2)),
             np.empty(MAX_CELLS, np.int64), np.empty((_CELL_VERTICES, 2)), np.empty((MAX_TRIANGLES, 3, 2)),
             np.empty(MAX_TRIANGLES, np.int64), np.empty((ns, 2, 3)))
     most = 1

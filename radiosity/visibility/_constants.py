@@ -32,15 +32,17 @@ CHUNK_SHADOWS = 100_000
 # Most hidden polygons at one receiver point united by the compiled kernels (inclusion-exclusion
 # up to _exact_kernel.IE_MAX_POLYGONS, then the sum over the union's boundary, n^2 edge tests);
 # more go to shapely. 10 while inclusion-exclusion did it all: 12-sided concentric prisms sent
-# points with ~20 to shapely, and their 72-patch view factors took 100 s instead of 33 s.
-MAX_UNION = 32
+# points with ~20 to shapely, and their 72-patch view factors took 100 s instead of 33 s. 32 until
+# 2026-12-03: in a furnished room at draft 6,017 points went to shapely with 33-62 each.
+MAX_UNION = 64
 # "auto" visibility sends a partly occluded pair to exact shadows whatever its factor when it
-# has at most this many possible occluders (no receiver point can need shapely) and
+# has at most this many possible occluders (no receiver point can need shapely; kept at 32 when
+# MAX_UNION went to 64, so the exact pairs of default and fine stayed the same) and
 # visibility_atol is below AUTO_EXACT_ATOL, else only if rays would likely miss by more than
 # visibility_atol (methods.uniform.assembly). Draft (1e-3) keeps its rays: its rows of F stay
 # within its 1e-2 (a 20-box furnace: 0.9975-1.0053 with rays, 0.9997-1.0003 exact) in 0.55-0.6x
 # the time.
-AUTO_EXACT_OCCLUDERS = MAX_UNION
+AUTO_EXACT_OCCLUDERS = 32
 AUTO_EXACT_ATOL = 1e-3
 
 # The same for the shadow-aligned cells, whose pairs fall back to fixed points past it: in a

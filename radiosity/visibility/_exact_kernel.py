@@ -488,6 +488,24 @@ def _outside_cone(x, occ, ms, planes, ns):
 
 
 @njit(cache=True)
+def union_scratch(ns, ms, max_union):
+    """Scratch arrays of :func:`_point_hidden` for sources of ns and occluders of ms vertices:
+    a, b, s1, s2 (clipping), hp, hn (the hidden polygons), levels, lcount, nxt, sa, sb (unions).
+
+    Inclusion-exclusion intersects at most ``IE_MAX_POLYGONS`` polygons (each intersection has at
+    most the sum of their vertex counts); the boundary sum needs one row of ``levels`` and one
+    interval of ``sa`` per polygon.
+    """
+    cap = ns + ms + 3
+    width = (IE_MAX_POLYGONS + 1) * cap + 8
+    depth = max(max_union, IE_MAX_POLYGONS + 1) + 1
+    rows = max(width, max_union) + 2
+    return (np.empty((ms + 3, 3)), np.empty((ms + 3, 3)), np.empty((cap, 3)), np.empty((cap, 3)),
+            np.empty((max_union, cap, 3)), np.empty(max_union, np.int64), np.empty((depth, width, 3)),
+            np.empty(depth, np.int64), np.empty(depth, np.int64), np.empty((rows, 3)), np.empty((rows, 3)))
+
+
+@njit(cache=True)
 def _point_hidden(x, nx, src, sn, occ, t0, t1, opolys, onormal, tol, max_union, a, b, s1, s2, hp, hn, levels,
                   lcount, nxt, sa, sb):
     """Form factor from x of the part of src hidden by the occluders opolys[occ[t0:t1]].
@@ -530,19 +548,7 @@ def _hidden_block(s, e, x, nx, source, source_normal, occ, starts, opolys, onorm
     """Groups s..e-1 of :func:`hidden_groups`."""
     ms = opolys.shape[1]
     ns = source.shape[1]
-    cap = ns + ms + 3
-    lcap = 2 * (max_union + 1) * cap + 8
-    a = np.empty((ms + 3, 3))
-    b = np.empty((ms + 3, 3))
-    s1 = np.empty((cap, 3))
-    s2 = np.empty((cap, 3))
-    hp = np.empty((max_union, cap, 3))
-    hn = np.empty(max_union, np.int64)
-    levels = np.empty((max_union + 1, lcap, 3))
-    lcount = np.empty(max_union + 1, np.int64)
-    nxt = np.empty(max_union + 1, np.int64)
-    sa = np.empty((lcap + 2, 3))
-    sb = np.empty((lcap + 2, 3))
+    a, b, s1, s2, hp, hn, levels, lcount, nxt, sa, sb = union_scratch(ns, ms, max_union)
     for grp in range(s, e):
         t0, t1 = starts[grp], starts[grp + 1]
         if t1 == t0:
@@ -579,19 +585,7 @@ def _exact_block(s, e, pts, normals, quads, i, j, starts, occ, opolys, onormal, 
     q = pts.shape[1]
     ms = opolys.shape[1]
     ns = quads.shape[1]
-    cap = ns + ms + 3
-    lcap = 2 * (max_union + 1) * cap + 8
-    a = np.empty((ms + 3, 3))
-    b = np.empty((ms + 3, 3))
-    s1 = np.empty((cap, 3))
-    s2 = np.empty((cap, 3))
-    hp = np.empty((max_union, cap, 3))
-    hn = np.empty(max_union, np.int64)
-    levels = np.empty((max_union + 1, lcap, 3))
-    lcount = np.empty(max_union + 1, np.int64)
-    nxt = np.empty(max_union + 1, np.int64)
-    sa = np.empty((lcap + 2, 3))
-    sb = np.empty((lcap + 2, 3))
+    a, b, s1, s2, hp, hn, levels, lcount, nxt, sa, sb = union_scratch(ns, ms, max_union)
     for p in range(s, e):
         src = quads[j[p]]
         sn = normals[j[p]]

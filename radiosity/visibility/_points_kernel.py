@@ -16,7 +16,8 @@ from numba import njit, prange
 # numba's disk cache of this module's kernels holds the _exact_kernel helpers compiled in (and
 # the _geometry_kernels ones they inline), and is keyed on this file alone: a change there must
 # touch this file too, or stale code runs.
-from ._exact_kernel import _crossing_status, _edge_offsets, _lambert, _mean_vertex, _next_occluder, _point_hidden
+from ._exact_kernel import (_crossing_status, _edge_offsets, _lambert, _mean_vertex, _next_occluder, _point_hidden,
+                            union_scratch)
 
 
 @njit(cache=True, inline="always")
@@ -173,8 +174,6 @@ def _cluster_block(c0, c1, x, nx, members, cstart, quads, normals, centroid, rad
     n_occ = polys.shape[0]
     nv = polys.shape[1]
     ns = quads.shape[1]
-    cap = ns + nv + 3
-    lcap = 2 * (max_union + 1) * cap + 8
     # scratch of the classification
     stack = np.empty(2 * node_lo.shape[0] + 2, np.int64)
     occ = np.empty(max(n_occ, 1), np.int64)
@@ -195,17 +194,7 @@ def _cluster_block(c0, c1, x, nx, members, cstart, quads, normals, centroid, rad
     stamp = np.full(max(n_occ, 1), -1, np.int64)
     src_cap = np.empty(5)
     # scratch of the exact shadows
-    a = np.empty((nv + 3, 3))
-    b = np.empty((nv + 3, 3))
-    s1 = np.empty((cap, 3))
-    s2 = np.empty((cap, 3))
-    hp = np.empty((max_union, cap, 3))
-    hn = np.empty(max_union, np.int64)
-    levels = np.empty((max_union + 1, lcap, 3))
-    lcount = np.empty(max_union + 1, np.int64)
-    nxt = np.empty(max_union + 1, np.int64)
-    sa = np.empty((lcap + 2, 3))
-    sb = np.empty((lcap + 2, 3))
+    a, b, s1, s2, hp, hn, levels, lcount, nxt, sa, sb = union_scratch(ns, nv, max_union)
     # the partly occluded sources of one point
     cand = np.empty(n_lit, np.int64)
     cand_f = np.empty(n_lit)
