@@ -261,6 +261,7 @@ def _pair_setup(quads, normals, centroid, r_rec, s_cen, s_nrm, r_src, i, j, rtol
     (m, 3) gathers, ~1 s of the Cornell box fill's 4-5 s form-factor stage (the loop: 0.1 s).
     """
     m = len(i)
+    i, j = np.ascontiguousarray(i, dtype=np.int64), np.ascontiguousarray(j, dtype=np.int64)
     crossing, order = np.empty(m, dtype=bool), np.empty(m, dtype=np.int64)
     orders = np.array(_APRIORI_ORDERS, dtype=np.int64)
     _pair_setup_loop(quads, normals, centroid, r_rec, s_cen, s_nrm, r_src, i, j, orders, rtol / _APRIORI_SAFETY,
@@ -943,16 +944,17 @@ def pair_factors(quads, normals, centroid, area, i, j, *, rtol: float = 1e-6, so
     >>> round(float(f[0]), 10)
     0.2000437761
     """
-    quads = np.asarray(quads, dtype=float)
-    normals = np.asarray(normals, dtype=float)
-    centroid = np.asarray(centroid, dtype=float)
-    i = np.asarray(i, dtype=np.int64)
-    j = np.asarray(j, dtype=np.int64)
+    # contiguous: a strided view would compile a second copy of each compiled pass it reaches
+    quads = np.ascontiguousarray(quads, dtype=float)
+    normals = np.ascontiguousarray(normals, dtype=float)
+    centroid = np.ascontiguousarray(centroid, dtype=float)
+    i = np.ascontiguousarray(i, dtype=np.int64)
+    j = np.ascontiguousarray(j, dtype=np.int64)
     if not (1e-12 <= rtol < 1):
         raise ValueError(f"rtol must be in [1e-12, 1), got {rtol}")
     if max_points is not None and not np.all(np.asarray(max_points) >= 5):
         raise ValueError(f"max_points must be at least 5, got {max_points}")
-    srcs = quads if sources is None else np.asarray(sources, dtype=float)
+    srcs = quads if sources is None else np.ascontiguousarray(sources, dtype=float)
     m = len(i)
     out = np.zeros(m)
     used = np.zeros(m, dtype=np.int64)

@@ -188,12 +188,13 @@ class Visibility:
 
     def __init__(self, quads: np.ndarray, normals: np.ndarray, groups: np.ndarray, scale: float, *,
                  samples: int = 2, max_samples: int = 4, cull: bool = True, closed: bool = True):
-        self.quads = quads
+        # contiguous: a strided view would compile a second copy of each ray and shadow kernel
+        quads = self.quads = np.ascontiguousarray(quads, dtype=np.float64)
+        normals = self.normals = np.ascontiguousarray(normals, dtype=np.float64)
         self.groups = np.asarray(groups)
         self.closed = closed and cull
         self._windings = None  # (column, labels) of winding_labels, on first use
         self._windings_for = quads
-        self.normals = normals
         self.scale = scale
         self.samples = samples
         self.max_samples = max(max_samples, samples)
