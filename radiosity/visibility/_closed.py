@@ -188,8 +188,8 @@ def closed_cull(quads: np.ndarray, i: np.ndarray, j: np.ndarray, rows: np.ndarra
     cand, c, pi, pj = cand[same], c[same], pi[same], pj[same]
     # either end may play the source, as long as it is the same one for all of S's faces in the
     # pair: take the one that drops more of them
-    by_i, by_j = _behind_kernel(np.ascontiguousarray(quads, dtype=np.float64), pi.astype(np.int64), pj.astype(np.int64),
-                                occ[cand].astype(np.int64),
+    by_i, by_j = _behind_kernel(np.ascontiguousarray(quads, dtype=np.float64), pi.astype(np.int64, copy=False),
+                                pj.astype(np.int64, copy=False), occ[cand].astype(np.int64, copy=False),
                                 np.ascontiguousarray(occluders.center, dtype=np.float64),
                                 np.ascontiguousarray(occluders.normal, dtype=np.float64),
                                 np.ascontiguousarray(front[cand], dtype=np.float64), float(tol))

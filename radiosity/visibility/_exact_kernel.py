@@ -440,8 +440,8 @@ _CONE_MARGIN = 1e-9
 
 @njit(cache=True, inline="always")
 def _cone_planes(x, src, ns, planes):
-    """Into planes[:ns], the inward normals of the planes through x and each edge of the convex
-    source src[:ns] (zero, meaning no test, where round-off would pick the direction)."""
+    """Into planes[:ns], the inward unit normals of the planes through x and each edge of the
+    convex source src[:ns] (zero, meaning no test, where round-off would pick the direction)."""
     cx, cy, cz = _mean_vertex(src, ns)
     wx = cx - x[0]
     wy = cy - x[1]
@@ -453,12 +453,14 @@ def _cone_planes(x, src, ns, planes):
         inward = mx * wx + my * wy + mz * wz
         if norm <= _CONE_MARGIN * math.sqrt(uu * vv) or \
                 abs(inward) <= _CONE_MARGIN * norm * math.sqrt(wx * wx + wy * wy + wz * wz):
-            mx = my = mz = 0.0  # a short edge or a flat cone: the plane's direction is round-off
+            norm = 0.0  # a short edge or a flat cone: the plane's direction is round-off
         elif inward < 0:
-            mx, my, mz = -mx, -my, -mz
-        planes[k, 0] = mx
-        planes[k, 1] = my
-        planes[k, 2] = mz
+            norm = -norm
+        # unit normals, so that _outside_cone, run per occluder, needs no norm of its own
+        scale = 1.0 / norm if norm != 0.0 else 0.0
+        planes[k, 0] = mx * scale
+        planes[k, 1] = my * scale
+        planes[k, 2] = mz * scale
 
 
 @njit(cache=True, inline="always")
@@ -471,15 +473,14 @@ def _outside_cone(x, occ, ms, planes, ns):
         mx = planes[k, 0]
         my = planes[k, 1]
         mz = planes[k, 2]
-        norm = math.sqrt(mx * mx + my * my + mz * mz)
-        if norm == 0.0:
+        if mx == 0.0 and my == 0.0 and mz == 0.0:
             continue
         outside = True
         for v in range(ms):
             dx = occ[v, 0] - x[0]
             dy = occ[v, 1] - x[1]
             dz = occ[v, 2] - x[2]
-            if mx * dx + my * dy + mz * dz >= -_CONE_MARGIN * norm * math.sqrt(dx * dx + dy * dy + dz * dz):
+            if mx * dx + my * dy + mz * dz >= -_CONE_MARGIN * math.sqrt(dx * dx + dy * dy + dz * dz):
                 outside = False
                 break
         if outside:

@@ -15,7 +15,7 @@ from numba import njit, prange
 
 # numba's disk cache of this module's kernels holds the _exact_kernel helpers compiled in (and
 # the _geometry_kernels ones they inline), and is keyed on this file alone: a change there must
-# touch this file too, or stale code runs.
+# touch this file too, or stale code runs (last: _point_hidden's cone test, 2026-12-03).
 from ._exact_kernel import (_crossing_status, _edge_offsets, _lambert, _mean_vertex, _next_occluder, _point_hidden,
                             union_scratch)
 
