@@ -60,6 +60,46 @@ def test_classification_kernel_matches_numpy_reference():
     assert {FREE, FULL, MAYBE} <= set(np.unique(a).tolist())
 
 
+def _straddling_rows(rng, t):
+    """Occluders in z = 0 and pairs where one patch (a random quad, tilted) crosses that plane
+    and the other lies above or below it."""
+    blockers = [rect(-0.3, 0.3, -0.3, 0.3, 0.0) + [*rng.normal(0, 0.2, 2), 0] for _ in range(5)]
+    occ = build_occluders(np.array(blockers), np.tile([0, 0, 1.0], (5, 1)), np.arange(5), np.ones(5, bool), 2.0)
+    base = rect(-0.2, 0.2, -0.2, 0.2, 0)
+    tilt = rng.normal(0, 1.0, (t, 2))
+    cut = base + rng.normal(0, 0.6, (t, 1, 3)) * [1, 1, 0.2]
+    cut[..., 2] += tilt @ base[:, :2].T  # a tilted plane through z near 0
+    side = rng.choice([-1.0, 1.0], (t, 1, 1))
+    whole = base + rng.normal(0, 0.6, (t, 1, 3)) * [1, 1, 0] + side * [0, 0, 1] * rng.uniform(0.05, 1.5, (t, 1, 1))
+    swap = rng.random(t) < 0.5
+    vi = np.where(swap[:, None, None], whole, cut)
+    vj = np.where(swap[:, None, None], cut, whole)
+    return occ, vi, vj, rng.integers(0, occ.n_occluders, t)
+
+
+def test_classification_cuts_a_patch_that_straddles_the_occluder_plane():
+    """A patch crossing an occluder's plane sends segments across it from its far part only:
+    FREE where those miss the occluder (it was always MAYBE), never FULL; kernel = reference,
+    and no segment between dense points of a FREE pair meets the occluder."""
+    rng = np.random.default_rng(11)
+    occ, vi, vj, k = _straddling_rows(rng, 3000)
+    straddles = [(np.ptp(np.sign(v[..., 2]), axis=1) > 0) for v in (vi, vj)]
+    one = straddles[0] ^ straddles[1]
+    assert one.mean() > 0.9
+    a = classify_rows(occ, vi, vj, k, 2.0)
+    np.testing.assert_array_equal(a, classify_rows_numpy(occ, vi, vj, k, 2.0))
+    assert FULL not in a[one].tolist() and 0.2 < (a[one] == FREE).mean() < 0.95
+    w = rng.dirichlet(np.ones(4), 400)  # points inside each quad's hull
+    free = np.flatnonzero(a == FREE)
+    for t in free[:300]:
+        p, q = w @ vi[t], w[rng.permutation(400)] @ vj[t]
+        cross = (p[:, 2] > 0) != (q[:, 2] > 0)
+        x = p + (p[:, 2] / (p[:, 2] - q[:, 2]))[:, None] * (q - p)
+        lo, hi = occ.polys[k[t]].min(axis=0), occ.polys[k[t]].max(axis=0)
+        inside = (x[:, :2] >= lo[:2]).all(axis=1) & (x[:, :2] <= hi[:2]).all(axis=1)
+        assert not (cross & inside).any()
+
+
 def test_classification_of_plates_and_blocker():
     low = [rect(0, 0.3, 0, 0.3, 0), rect(0.5, 1, 0.5, 1, 0), rect(0.4, 0.6, 0.4, 0.6, 0)]
     up = [rect(0.4, 0.6, 0.4, 0.6, 1, down=True), rect(0, 0.1, 0, 0.1, 1, down=True)]

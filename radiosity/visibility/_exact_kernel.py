@@ -632,28 +632,95 @@ def exact_pairs(pts, normals, quads, i, j, starts, occ, opolys, onormal, tol, ma
 
 @njit(cache=True, inline="always")
 def _classify_one(vi, vj, polys, normal, center, inward, kk, tol, si, sj, outside, valid, gi, gj):
-    """FREE (0) / FULL (1) / MAYBE (2) of one (pair, occluder kk).
+    """FREE (0) / FULL (1) / MAYBE (2) of the segments between the hulls of vi (nvi, 3) and vj
+    (nvj, 3) (two patches, or a point or a cluster's box and a patch) and occluder kk.
 
-    si, sj (4,), outside, valid (nv,), gi, gj (4, nv): scratch. The 16 crossing points are
-    tested against the edges through the edge functions at the 8 vertices: g is affine, so
-    g(vi + t (vj - vi)) = g(vi) + t (g(vj) - g(vi)).
+    si, sj (nvi,), (nvj,), outside, valid (nv,), gi, gj (nvi, nv), (nvj, nv): scratch. The
+    nvi * nvj crossing points are tested against the edges through the edge functions at the
+    vertices: g is affine, so g(vi + t (vj - vi)) = g(vi) + t (g(vj) - g(vi)).
     """
-    nv = polys.shape[1]
+    nvi, nvj = vi.shape[0], vj.shape[0]
     n0, n1, n2 = normal[kk, 0], normal[kk, 1], normal[kk, 2]
     c0, c1, c2 = center[kk, 0], center[kk, 1], center[kk, 2]
-    for a in range(4):
+    for a in range(nvi):
         si[a] = (vi[a, 0] - c0) * n0 + (vi[a, 1] - c1) * n1 + (vi[a, 2] - c2) * n2
+    for a in range(nvj):
         sj[a] = (vj[a, 0] - c0) * n0 + (vj[a, 1] - c1) * n1 + (vj[a, 2] - c2) * n2
-    imin, imax, jmin, jmax = si.min(), si.max(), sj.min(), sj.max()
+    return _plane_status(vi, nvi, vj, nvj, polys, inward, kk, tol, si, sj, outside, valid, gi, gj)
+
+
+@njit(cache=True, inline="always")
+def _span(values, n):
+    """(min, max) of values[:n] (explicit loop: a slice's min/max is slow in a hot loop)."""
+    lo = values[0]
+    hi = values[0]
+    for k in range(1, n):
+        lo = min(lo, values[k])
+        hi = max(hi, values[k])
+    return lo, hi
+
+
+@njit(cache=True, inline="always")
+def _plane_status(vi, nvi, vj, nvj, polys, inward, kk, tol, si, sj, outside, valid, gi, gj):
+    """FREE (0) / FULL (1) / MAYBE (2) of the segments between the hulls of vi[:nvi] and
+    vj[:nvj] against occluder kk, given their offsets si, sj from its plane.
+
+    Two sets on one side of the plane are free; on either side, the crossing points decide. A
+    set that straddles the plane is cut by it (:func:`_straddle_status`): a far triangle's
+    plane, extended, cuts many patches of a terrain or a room, and each such pair was MAYBE.
+    """
+    nv = polys.shape[1]
+    imin, imax = _span(si, nvi)
+    jmin, jmax = _span(sj, nvj)
     on_plane = max(abs(imin), abs(imax)) <= tol or max(abs(jmin), abs(jmax)) <= tol
     pos_i, neg_i = imin >= -tol, imax <= tol
     pos_j, neg_j = jmin >= -tol, jmax <= tol
     if on_plane or (pos_i and pos_j) or (neg_i and neg_j):
         return 0
-    if not ((pos_i and neg_j) or (neg_i and pos_j)):
-        return 2  # a patch straddles the plane
-    n_outside = _edge_offsets(polys, inward, kk, vi, 4, vj, 4, valid, outside, gi, gj)
-    return _crossing_status(si, 4, sj, 4, gi, gj, valid, outside, n_outside, nv, tol, tol)
+    straddle_i, straddle_j = not (pos_i or neg_i), not (pos_j or neg_j)
+    if straddle_i and straddle_j:
+        return 2
+    n_outside = _edge_offsets(polys, inward, kk, vi, nvi, vj, nvj, valid, outside, gi, gj)
+    if straddle_i:
+        side = 1.0 if pos_j else -1.0
+        return _straddle_status(si, gi, nvi, sj, gj, nvj, side, valid, outside, n_outside, nv, tol)
+    if straddle_j:
+        side = 1.0 if pos_i else -1.0
+        return _straddle_status(sj, gj, nvj, si, gi, nvi, side, valid, outside, n_outside, nv, tol)
+    return _crossing_status(si, nvi, sj, nvj, gi, gj, valid, outside, n_outside, nv, tol, tol, tol)
+
+
+@njit(cache=True, inline="always")
+def _straddle_status(sa, ga, na, sb, gb, nb, side, valid, outside, n_outside, nv, tol):
+    """FREE (0) or MAYBE (2) of the segments from the hull of points a, which straddles an
+    occluder's plane, to the hull of points b, on its ``side`` (+1 or -1).
+
+    Only the part of a beyond the plane (side * s <= 0) sends segments across it. That part is
+    the hull of a's vertices there and of the points where the plane cuts the segments between
+    a's vertices of strictly opposite signs (every pair, so any hull of points is cut right);
+    its offsets (plane 0, edges interpolated: they are affine) go to :func:`_crossing_status`.
+    Never FULL: the part of a on b's side sees b past the plane.
+    The cut points are allocated here, on this rare path only.
+    """
+    cs = np.empty(na + (na * na) // 4 + 1)
+    cg = np.empty((cs.shape[0], nv))
+    m = 0
+    for a in range(na):
+        if side * sa[a] <= 0.0:
+            cs[m] = sa[a]
+            for e in range(nv):
+                cg[m, e] = ga[a, e]
+            m += 1
+    for a in range(na):
+        for c in range(a + 1, na):
+            if (sa[a] < 0.0 < sa[c]) or (sa[c] < 0.0 < sa[a]):
+                t = sa[a] / (sa[a] - sa[c])
+                cs[m] = 0.0
+                for e in range(nv):
+                    cg[m, e] = ga[a, e] + t * (ga[c, e] - ga[a, e])
+                m += 1
+    status = _crossing_status(cs, m, sb, nb, cg, gb, valid, outside, n_outside, nv, tol, tol, tol)
+    return 0 if status == 0 else 2
 
 
 @njit(cache=True, parallel=True)
@@ -705,12 +772,19 @@ def _edge_offsets(polys, inward, kk, P, nP, Q, nQ, valid, outside, gp, gq):
 
 
 @njit(cache=True, inline="always")
-def _crossing_status(sa, na, sb, nb, ga, gb, valid, outside, n_outside, nv, den_tol, lim):
+def _crossing_status(sa, na, sb, nb, ga, gb, valid, outside, n_outside, nv, den_tol, out_lim, in_lim):
     """FREE (0) / FULL (1) / MAYBE (2) of the segments from points a (plane offsets sa[:na], edge
     offsets ga) to points b (sb[:nb], gb) that cross an occluder's plane, from where each
     crosses it: g is affine along a segment, so g(a + t (b - a)) = g(a) + t (g(b) - g(a)).
     ``n_outside``/``outside``: from :func:`_edge_offsets`. A segment (nearly) in the plane
-    (|sa - sb| <= den_tol) is MAYBE; ``lim``: the margin on the edge offsets."""
+    (|sa - sb| <= den_tol) is MAYBE.
+
+    The crossings are outside an edge where every one has g < ``out_lim`` and inside the
+    occluder where every g > ``in_lim``. With ``out_lim`` > 0, crossings on an edge count as
+    outside it: touching is not covering. A patch that meets a neighbour at a shared edge
+    (a terrain's triangles, a box's top and side) sends segments that cross the neighbour's
+    plane at that edge at most, and every such pair was MAYBE; the segments meeting the
+    occluder then lie within ``out_lim`` of its boundary, a sliver of measure ~ out_lim."""
     inside_all = True
     for a in range(na):
         for b in range(nb):
@@ -722,10 +796,10 @@ def _crossing_status(sa, na, sb, nb, ga, gb, valid, outside, n_outside, nv, den_
                 if not valid[e]:
                     continue
                 g = ga[a, e] + tt * (gb[b, e] - ga[a, e])
-                if g >= -lim and outside[e]:
+                if g >= out_lim and outside[e]:
                     outside[e] = False
                     n_outside -= 1
-                if g <= lim:
+                if g <= in_lim:
                     inside_all = False
             if n_outside == 0 and not inside_all:
                 return 2
@@ -854,7 +928,7 @@ def _classify_set(P, nP, Q, nQ, polys, normal, center, inward, kk, tol, sp, sq, 
         return 2
     n_outside = _edge_offsets(polys, inward, kk, P, nP, Q, nQ, valid, outside, gp, gq)
     # separated by 2 tol on each side, so no segment lies in the plane (|sp - sq| > 4 tol)
-    return _crossing_status(sp, nP, sq, nQ, gp, gq, valid, outside, n_outside, nv, tol, tol + half)
+    return _crossing_status(sp, nP, sq, nQ, gp, gq, valid, outside, n_outside, nv, tol, half, tol + half)
 
 
 @njit(cache=True, inline="always")

@@ -259,10 +259,37 @@ def _classify_chunk(occ, vi, vj, k, scale):
         P, inward = occ.polys[k[o]], occ.inward[k[o]]
         g = np.einsum("tpmc,tmc->tpm", m[:, :, None, :] - P[:, None, :, :], inward)  # (t, 16, m)
         valid = inward.any(axis=2)[:, None, :]
-        separated = ((g < -tol) & valid).all(axis=1).any(axis=1)  # one edge has all points outside
+        separated = ((g < tol) & valid).all(axis=1).any(axis=1)  # one edge has all points outside
         inside = ((g > tol) | ~valid).all(axis=(1, 2)) & den_ok
         state = np.full(len(o), MAYBE, np.int8)
         state[separated] = FREE
         state[inside & ~separated] = FULL
         out[o] = state
+    one = ~same & ~opposite & ((pos_i | neg_i) != (pos_j | neg_j))  # one of the two straddles the plane
+    for t in np.flatnonzero(one):
+        cut, whole = (vi[t], vj[t]) if not (pos_i[t] | neg_i[t]) else (vj[t], vi[t])
+        out[t] = _straddle_reference(cut, whole, occ.polys[k[t]], occ.inward[k[t]], n[t], c[t], tol)
     return out
+
+
+def _straddle_reference(cut, whole, poly, inward, normal, centre, tol):
+    """FREE or MAYBE of the segments from ``cut`` (straddling the occluder's plane) to ``whole``
+    (on one side): the part of ``cut`` beyond the plane, as points, and their crossings."""
+    s_cut, s_whole = (cut - centre) @ normal, (whole - centre) @ normal
+    side = 1.0 if s_whole.min() >= -tol else -1.0
+    beyond = side * s_cut <= 0
+    points, s_p = list(cut[beyond]), list(s_cut[beyond])
+    for a in range(len(cut)):
+        for b in range(a + 1, len(cut)):
+            if s_cut[a] * s_cut[b] < 0:  # the plane cuts the segment between them
+                points.append(cut[a] + s_cut[a] / (s_cut[a] - s_cut[b]) * (cut[b] - cut[a]))
+                s_p.append(0.0)
+    points, s_p = np.array(points), np.array(s_p)
+    den = s_p[:, None] - s_whole[None, :]
+    if (np.abs(den) <= tol).any():
+        return MAYBE
+    t = s_p[:, None] / den
+    crossing = points[:, None, :] + t[..., None] * (whole[None, :, :] - points[:, None, :])
+    g = np.einsum("pqec,ec->pqe", crossing[:, :, None, :] - poly[None, None, :, :], inward)
+    valid = inward.any(axis=1)
+    return FREE if ((g < tol) & valid).all(axis=(0, 1)).any() else MAYBE

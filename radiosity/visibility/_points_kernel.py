@@ -15,20 +15,9 @@ from numba import njit, prange
 
 # numba's disk cache of this module's kernels holds the _exact_kernel helpers compiled in (and
 # the _geometry_kernels ones they inline), and is keyed on this file alone: a change there must
-# touch this file too, or stale code runs (last: _point_hidden's cone test, 2026-12-03).
-from ._exact_kernel import (_crossing_status, _edge_offsets, _lambert, _mean_vertex, _next_occluder, _point_hidden,
-                            union_scratch)
-
-
-@njit(cache=True, inline="always")
-def _span(values, n):
-    """(min, max) of values[:n] (explicit loop: a slice's min/max is slow in a hot loop)."""
-    lo = values[0]
-    hi = values[0]
-    for k in range(1, n):
-        lo = min(lo, values[k])
-        hi = max(hi, values[k])
-    return lo, hi
+# touch this file too, or stale code runs (last: _plane_status cuts a straddling set, and
+# touching is not covering; 2026-12-04).
+from ._exact_kernel import _classify_one, _lambert, _mean_vertex, _next_occluder, _point_hidden, union_scratch
 
 
 @njit(cache=True, inline="always")
@@ -68,36 +57,6 @@ def _caps_meet(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] >= bound - _CAP_PAD
 
 
-@njit(cache=True, inline="always")
-def _classify_hull_one(vi, vj, polys, normal, center, inward, kk, tol, si, sj, outside, valid, gi, gj):
-    """FREE (0) / FULL (1) / MAYBE (2) of the segments from the convex hull of vi (nvi, 3)
-    (a cluster's box) to the convex source vj (4, 3), against occluder kk.
-
-    ``_exact_kernel._classify_one`` for a receiver of any number of vertices: the crossing
-    points of all segments lie in the convex hull of the nvi * 4 vertex-to-vertex crossings.
-    """
-    nvi = vi.shape[0]
-    nvj = vj.shape[0]
-    nv = polys.shape[1]
-    n0, n1, n2 = normal[kk, 0], normal[kk, 1], normal[kk, 2]
-    c0, c1, c2 = center[kk, 0], center[kk, 1], center[kk, 2]
-    for a in range(nvi):
-        si[a] = (vi[a, 0] - c0) * n0 + (vi[a, 1] - c1) * n1 + (vi[a, 2] - c2) * n2
-    for a in range(nvj):
-        sj[a] = (vj[a, 0] - c0) * n0 + (vj[a, 1] - c1) * n1 + (vj[a, 2] - c2) * n2
-    imin, imax = _span(si, nvi)
-    jmin, jmax = _span(sj, nvj)
-    on_plane = max(abs(imin), abs(imax)) <= tol or max(abs(jmin), abs(jmax)) <= tol
-    pos_i, neg_i = imin >= -tol, imax <= tol
-    pos_j, neg_j = jmin >= -tol, jmax <= tol
-    if on_plane or (pos_i and pos_j) or (neg_i and neg_j):
-        return 0
-    if not ((pos_i and neg_j) or (neg_i and pos_j)):
-        return 2
-    n_outside = _edge_offsets(polys, inward, kk, vi, nvi, vj, nvj, valid, outside, gi, gj)
-    return _crossing_status(si, nvi, sj, nvj, gi, gj, valid, outside, n_outside, nv, tol, tol)
-
-
 @njit(cache=True)
 def _classify_hull(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, node_hi, node_left, node_right,
                    node_start, node_count, order, pad, tol, out_occ, stack, lo, hi, si, sj, outside, valid, gi, gj,
@@ -134,7 +93,7 @@ def _classify_hull(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, nod
                 stamp[kk] = stamp_id
             if not _caps_meet(caps[kk], src_cap):
                 continue
-        state = _classify_hull_one(vi, vj, polys, normal, center, inward, kk, tol, si, sj, outside, valid, gi,
+        state = _classify_one(vi, vj, polys, normal, center, inward, kk, tol, si, sj, outside, valid, gi,
                                    gj)
         if state == 1:
             return 1, 0
