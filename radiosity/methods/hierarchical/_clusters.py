@@ -5,8 +5,10 @@ patches (median splits of their centroids along the longest axis), each node a b
 sphere. Refinement starts from the root's link to itself, so a scene of n patches does not
 start with n^2 links. A link (r gathers from s) between nodes, one of them a cluster, is
 
-- bounded orientation-free: any point of r sees at most ``A_s / (pi d^2)`` of s, with ``d``
-  the gap between the two spheres (1 if they overlap): ``err = max_c(rho_r,c B_s,c) * that``;
+- bounded: any point of r sees at most ``A_s cos_r cos_s / (pi d^2)`` of s, with ``d`` the gap
+  between the two spheres and the cosines bounded over the normal cones (1 if they overlap),
+  and at most ``sin^2`` of the angle the two cones leave between them (the band of directions
+  both can face, :meth:`ClusterTree.orientation_bound`): ``err = max_c(rho_r,c B_s,c) * that``;
 - estimated isotropically when kept: the power r gets is ``B_s P_r(u) P_s(-u) / (pi d^2)``,
   with ``P(u) = sum A_i max(0, n_i . u)`` the projected area of a node's faces toward the
   other's centre ``u`` (faces are one-sided), spread evenly over r's area (the push); no
@@ -191,7 +193,19 @@ class ClusterTree:
         cos_s = np.cos(np.minimum(np.pi / 2, np.maximum(0.0, _angle(self.axis[s], -w) - self.cone[s] - spread)))
         safe_gap = np.where(apart, gap, 1.0)
         factor = np.where(apart, np.minimum(1.0, self.area[s] * cos_r * cos_s / (np.pi * safe_gap ** 2)), 1.0)
-        return (self.rho[r] * B[s]).max(axis=1) * factor
+        return (self.rho[r] * B[s]).max(axis=1) * np.minimum(factor, self.orientation_bound(r, s))
+
+    def orientation_bound(self, r: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """(m,) bound on the factor from any point of r to s from the normal cones alone, for
+        spheres that overlap as well: ``sin^2 w``, ``w = angle(axis_r, axis_s) + cone_r + cone_s``.
+
+        s sends light only along directions u with n_s . u < 0 for some n_s in its cone, all
+        within pi/2 + cone_s of -axis_s, so at least pi/2 - w from any receiver normal n_r in
+        r's cone; the cosine-weighted share of that band of the hemisphere is sin^2 w. Without
+        it two touching patches of a terrain (or of one wall) always split down to their leaves.
+        """
+        w = _angle(self.axis[r], self.axis[s]) + self.cone[r] + self.cone[s]
+        return np.where(w < np.pi / 2, np.sin(np.minimum(w, np.pi / 2)) ** 2, 1.0)
 
     def refine(self, r: np.ndarray, s: np.ndarray, B: np.ndarray, eps: float):
         """Split node links over ``eps`` down to where they meet it or join two patches.
