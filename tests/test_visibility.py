@@ -181,6 +181,55 @@ def test_fused_classification_matches_numpy_reference():
     np.testing.assert_array_equal(back, status)
 
 
+def _segments_meet_quad(p, q, quad):
+    """(m,) bool: segment p[m]-q[m] crosses the planar convex quad."""
+    n = np.cross(quad[1] - quad[0], quad[2] - quad[0])
+    n /= np.linalg.norm(n)
+    sp, sq = (p - quad[0]) @ n, (q - quad[0]) @ n
+    cross = sp * sq < 0
+    x = p + (sp / np.where(cross, sp - sq, 1.0))[:, None] * (q - p)
+    inside = np.ones(len(p), bool)
+    for e in range(4):
+        a, b = quad[e], quad[(e + 1) % 4]
+        inside &= np.einsum("mc,c->m", np.cross(b - a, x - a), n) >= 0
+    return cross & inside
+
+
+def test_walk_bounded_by_the_pair_hull_drops_only_occluders_no_segment_meets():
+    """Pairs whose box holds many occluders walk the BVH within the faces of their hull too
+    (after HULL_AFTER occluders): the status and occluders may only tighten against the
+    box-only reference, FULL never changes, and no dense segment meets an occluder dropped."""
+    rng = np.random.default_rng(5)
+    centres = rng.uniform(0, 1, (500, 3))
+    u = rng.normal(size=(500, 3))
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    w = np.cross(u, rng.normal(size=(500, 3)))
+    w /= np.linalg.norm(w, axis=1)[:, None]
+    v = np.cross(u, w)
+    half = rng.uniform(0.01, 0.04, (500, 1))
+    quads = np.stack([centres + half * (sa * w + sb * v) for sa, sb in ((-1, -1), (1, -1), (1, 1), (-1, 1))], axis=1)
+    vis = make_vis(quads)
+    i, j = rng.integers(0, 500, (2, 4000))
+    keep = i != j
+    i, j = i[keep], j[keep]
+    status, rows, occ = vis.classify(i, j)
+    ref_status, ref_rows, ref_occ = vis._classify(quads[i], quads[j], np.minimum(vis._lo[i], vis._lo[j]),
+                                                  np.maximum(vis._hi[i], vis._hi[j]))
+    np.testing.assert_array_equal(status == FULL, ref_status == FULL)
+    assert not ((ref_status == FREE) & (status != FREE)).any()
+    got = set(zip(rows.tolist(), occ.tolist()))
+    ref = set(zip(ref_rows[ref_status[ref_rows] == MAYBE].tolist(), ref_occ[ref_status[ref_rows] == MAYBE].tolist()))
+    assert got <= ref
+    dropped = sorted(ref - got)
+    assert len(dropped) > 100 and (status == FREE).sum() > (ref_status == FREE).sum()  # the hull did cut
+    wts = rng.dirichlet(np.ones(4), 300)
+    for r, k in dropped[:400]:
+        p, q = wts @ quads[i[r]], wts[rng.permutation(300)] @ quads[j[r]]
+        assert not _segments_meet_quad(p, q, quads[k]).any()
+    back, _, _ = vis.classify(j, i)
+    np.testing.assert_array_equal(back, status)
+
+
 def test_runs_of_pairs_classified_whole_match_pairs_one_by_one():
     """Runs of pairs sharing a receiver or a source are classified as a whole first
     (``_exact_kernel._classify_set``); shuffled, no run forms and every pair is walked alone:

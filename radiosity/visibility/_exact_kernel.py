@@ -809,14 +809,30 @@ def _crossing_status(sa, na, sb, nb, ga, gb, valid, outside, n_outside, nv, den_
 
 
 @njit(cache=True, inline="always")
-def _next_leaf(stack, top, lo, hi, node_lo, node_hi, node_left, node_right, pad):
+def _beyond_planes(blo, bhi, planes, n_planes, pad):
+    """The box [blo, bhi] lies beyond one of planes[:n_planes] (unit n, d: outside where
+    n . x > d) by more than pad."""
+    for k in range(n_planes):
+        m = -planes[k, 3]
+        for c in range(3):
+            m += planes[k, c] * (blo[c] if planes[k, c] > 0.0 else bhi[c])
+        if m > pad:
+            return True
+    return False
+
+
+@njit(cache=True, inline="always")
+def _next_leaf(stack, top, lo, hi, node_lo, node_hi, node_left, node_right, pad, planes, n_planes):
     """One step of a depth-first BVH walk (``stack[:top + 1]`` pending, start with ``stack[0] = 0``,
-    ``top = 0``): (top, the next leaf node whose box meets [lo, hi] + pad), or (top, -1) when done.
-    Leaves come in the same order as the recursive walk (left child first)."""
+    ``top = 0``): (top, the next leaf node whose box meets [lo, hi] + pad and lies inside none of
+    ``planes[:n_planes]``' outer sides), or (top, -1) when done. Leaves come in the same order as
+    the recursive walk (left child first)."""
     while top >= 0:
         node = stack[top]
         top -= 1
         if not _meets(lo, hi, node_lo[node], node_hi[node], pad):
+            continue
+        if n_planes and _beyond_planes(node_lo[node], node_hi[node], planes, n_planes, pad):
             continue
         if node_left[node] >= 0:
             top += 1
@@ -830,40 +846,100 @@ def _next_leaf(stack, top, lo, hi, node_lo, node_hi, node_left, node_right, pad)
 
 @njit(cache=True, inline="always")
 def _next_occluder(stack, top, pos, end, lo, hi, olo, ohi, node_lo, node_hi, node_left, node_right, node_start,
-                   node_count, order, pad):
-    """The next occluder whose box meets [lo, hi] + pad, walking the BVH depth first (start with
-    ``stack[0] = 0`` and ``top = pos = end = 0``): (top, pos, end, occluder), occluder -1 when
-    done. ``pos:end`` is what is left of the current leaf's slots in ``order``."""
+                   node_count, order, pad, planes, n_planes):
+    """The next occluder whose box meets [lo, hi] + pad (and lies beyond none of
+    ``planes[:n_planes]``), walking the BVH depth first (start with ``stack[0] = 0`` and
+    ``top = pos = end = 0``): (top, pos, end, occluder), occluder -1 when done. ``pos:end`` is
+    what is left of the current leaf's slots in ``order``."""
     while True:
         while pos < end:
             kk = order[pos]
             pos += 1
-            if _meets(lo, hi, olo[kk], ohi[kk], pad):
+            if _meets(lo, hi, olo[kk], ohi[kk], pad) and not (
+                    n_planes and _beyond_planes(olo[kk], ohi[kk], planes, n_planes, pad)):
                 return top, pos, end, kk
-        top, node = _next_leaf(stack, top, lo, hi, node_lo, node_hi, node_left, node_right, pad)
+        top, node = _next_leaf(stack, top, lo, hi, node_lo, node_hi, node_left, node_right, pad, planes, n_planes)
         if node < 0:
             return top, pos, end, -1
         pos, end = node_start[node], node_start[node] + node_count[node]
 
 
+# A pair's walk bounds its occluders by the faces of the hull of its two patches (as well as by
+# their box) once it has met this many: a pair whose box holds few occluders does not pay for
+# the hull, and one whose box spans a terrain (a light above, a far ground triangle: thousands of
+# triangles in the box, a handful near the segments) stops walking most of them.
+HULL_AFTER = 16
+MAX_HULL_PLANES = 34  # both patches' planes and every (edge of one, vertex of the other)
+
+
+@njit(cache=True, inline="always")
+def _hull_planes(vi, vj, planes, tol):
+    """Face planes of the hull of the 8 vertices of two quads, into planes (unit n, d: the hull
+    lies where n . x <= d + tol); returns how many. Candidates: each quad's plane and each plane
+    through an edge of one and a vertex of the other (the faces of the hull of two convex
+    polygons); a candidate with points on both sides is not a face and is skipped. Any subset of
+    the faces bounds a region holding the hull, so a degenerate candidate may be left out."""
+    n = 0
+    for side in range(2):
+        A = vi if side == 0 else vj
+        B = vj if side == 0 else vi
+        for a in range(4):
+            a1 = (a + 1) % 4
+            e0, e1, e2 = A[a1, 0] - A[a, 0], A[a1, 1] - A[a, 1], A[a1, 2] - A[a, 2]
+            for b in range(5):  # b = 4: the quad's own plane (its next vertex after the edge)
+                P = A[(a + 2) % 4] if b == 4 else B[b]
+                if b == 4 and a > 0:
+                    continue
+                w0, w1, w2 = P[0] - A[a, 0], P[1] - A[a, 1], P[2] - A[a, 2]
+                n0, n1, n2 = e1 * w2 - e2 * w1, e2 * w0 - e0 * w2, e0 * w1 - e1 * w0
+                length = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+                scale = math.sqrt((e0 * e0 + e1 * e1 + e2 * e2) * (w0 * w0 + w1 * w1 + w2 * w2))
+                if not length > 1e-9 * scale:
+                    continue
+                n0, n1, n2 = n0 / length, n1 / length, n2 / length
+                d = n0 * A[a, 0] + n1 * A[a, 1] + n2 * A[a, 2]
+                hmin, hmax = np.inf, -np.inf
+                for k in range(8):
+                    q = vi[k] if k < 4 else vj[k - 4]
+                    h = n0 * q[0] + n1 * q[1] + n2 * q[2] - d
+                    hmin, hmax = min(hmin, h), max(hmax, h)
+                if hmax <= tol:
+                    sign = 1.0
+                elif hmin >= -tol:
+                    sign = -1.0
+                else:
+                    continue
+                planes[n, 0], planes[n, 1], planes[n, 2], planes[n, 3] = sign * n0, sign * n1, sign * n2, sign * d
+                n += 1
+    return n
+
+
 @njit(cache=True, inline="always")
 def _classify_pair(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, node_hi, node_left, node_right,
-                   node_start, node_count, order, pad, tol, out_occ, stack, lo, hi, si, sj, outside, valid, gi, gj):
+                   node_start, node_count, order, pad, tol, out_occ, stack, lo, hi, si, sj, outside, valid, gi, gj,
+                   planes):
     """Walk the BVH for one pair; write its MAYBE occluders to out_occ (as many as fit).
 
     Returns (status, number of MAYBE occluders); a FULL pair stops at its first full occluder.
+    After HULL_AFTER occluders the walk also leaves out boxes beyond a face of the pair's hull
+    (``planes``: scratch); the same pair always walks the same way.
     """
     for c in range(3):
         lo[c] = min(vi[:, c].min(), vj[:, c].min())
         hi[c] = max(vi[:, c].max(), vj[:, c].max())
     n_maybe = 0
+    met = 0
+    n_planes = 0
     top, pos, end = 0, 0, 0
     stack[0] = 0
     while True:
         top, pos, end, kk = _next_occluder(stack, top, pos, end, lo, hi, olo, ohi, node_lo, node_hi, node_left,
-                                           node_right, node_start, node_count, order, pad)
+                                           node_right, node_start, node_count, order, pad, planes, n_planes)
         if kk < 0:
             break
+        met += 1
+        if met == HULL_AFTER:
+            n_planes = _hull_planes(vi, vj, planes, tol)
         state = _classify_one(vi, vj, polys, normal, center, inward, kk, tol, si, sj, outside, valid, gi, gj)
         if state == 1:
             return 1, 0
@@ -900,6 +976,10 @@ def on_facet_planes(quads, planes, candidates, tol):
 # _classify_set): up to _GROUP_MAX pairs at once, halved while undecided down to _GROUP_MIN.
 _GROUP_MAX = 32
 _GROUP_MIN = 4
+# A run whose box holds more occluders than this goes to its pairs one by one at once: the box of
+# a light and 32 ground triangles spans a terrain, and each halving walked all of it again (the
+# pairs' own walks are bounded by their hulls, see HULL_AFTER).
+_GROUP_MAX_MET = 256
 
 
 @njit(cache=True, inline="always")
@@ -957,7 +1037,8 @@ def _put_side(v, idx, a, b, fixed, out):
 @njit(cache=True, inline="always")
 def _group_status(P, nP, Q, nQ, polys, normal, center, inward, olo, ohi, node_lo, node_hi, node_left, node_right,
                   node_start, node_count, order, pad, tol, stack, lo, hi, sp, sq, outside, valid, gp, gq):
-    """0 / 1 if every pair of the set (see :func:`_classify_set`) is FREE / FULL, else 2.
+    """0 / 1 if every pair of the set (see :func:`_classify_set`) is FREE / FULL, else 2; 3 if
+    the set's box holds more than _GROUP_MAX_MET occluders (its pairs are walked one by one).
 
     The set's box holds every pair's box, so its BVH walk reaches every occluder a pair's walk
     does: all of them free means each pair is free; one full blocks each pair (a pair's walk
@@ -966,13 +1047,18 @@ def _group_status(P, nP, Q, nQ, polys, normal, center, inward, olo, ohi, node_lo
         lo[c] = min(P[:nP, c].min(), Q[:nQ, c].min())
         hi[c] = max(P[:nP, c].max(), Q[:nQ, c].max())
     undecided = False
+    no_planes = np.empty((0, 4))
+    met = 0
     top, pos, end = 0, 0, 0
     stack[0] = 0
     while True:
         top, pos, end, kk = _next_occluder(stack, top, pos, end, lo, hi, olo, ohi, node_lo, node_hi, node_left,
-                                           node_right, node_start, node_count, order, pad)
+                                           node_right, node_start, node_count, order, pad, no_planes, 0)
         if kk < 0:
             break
+        met += 1
+        if met > _GROUP_MAX_MET:
+            return 3
         state = _classify_set(P, nP, Q, nQ, polys, normal, center, inward, kk, tol, sp, sq, outside, valid,
                               gp, gq)
         if state == 1:
@@ -1001,6 +1087,7 @@ def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, oh
     valid = np.zeros(nv, np.bool_)
     gi = np.empty((4, nv))
     gj = np.empty((4, nv))
+    planes = np.empty((MAX_HULL_PLANES, 4))
     width = first.shape[1]
     second = starts.shape[0] > 0
     if second:
@@ -1013,7 +1100,7 @@ def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, oh
             out = occ[starts[p]:starts[p + 1]]
             _classify_pair(va[ia[p]], vb[ib[p]], polys, normal, center, inward, olo, ohi, node_lo, node_hi,
                            node_left, node_right, node_start, node_count, order, pad, tol, out, stack, lo, hi,
-                           si, sj, outside, valid, gi, gj)
+                           si, sj, outside, valid, gi, gj, planes)
         return
     nmax = max(8, va.shape[1], vb.shape[1])
     P, Q = np.empty((nmax, 3)), np.empty((nmax, 3))
@@ -1043,7 +1130,7 @@ def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, oh
                 for t in range(single_from, single_to):
                     st, n = _classify_pair(va[ia[t]], vb[ib[t]], polys, normal, center, inward, olo, ohi, node_lo,
                                            node_hi, node_left, node_right, node_start, node_count, order, pad, tol,
-                                           first[t], stack, lo, hi, si, sj, outside, valid, gi, gj)
+                                           first[t], stack, lo, hi, si, sj, outside, valid, gi, gj, planes)
                     status[t] = st
                     count[t] = n
                 single_from = single_to
@@ -1055,11 +1142,11 @@ def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, oh
             st = _group_status(P, nP, Q, nQ, polys, normal, center, inward, olo, ohi, node_lo, node_hi, node_left,
                                node_right, node_start, node_count, order, pad, tol, stack, lo, hi, sp, sq,
                                outside, valid, gp, gq)
-            if st != 2:
+            if st == 0 or st == 1:
                 for t in range(a, b):
                     status[t] = st
                     count[t] = 0
-            elif b - a >= 2 * _GROUP_MIN:
+            elif st == 2 and b - a >= 2 * _GROUP_MIN:
                 mid = (a + b) // 2
                 ranges[n_ranges, 0], ranges[n_ranges, 1] = mid, b
                 ranges[n_ranges + 1, 0], ranges[n_ranges + 1, 1] = a, mid

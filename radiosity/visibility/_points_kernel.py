@@ -15,8 +15,8 @@ from numba import njit, prange
 
 # numba's disk cache of this module's kernels holds the _exact_kernel helpers compiled in (and
 # the _geometry_kernels ones they inline), and is keyed on this file alone: a change there must
-# touch this file too, or stale code runs (last: _plane_status cuts a straddling set, and
-# touching is not covering; 2026-12-04).
+# touch this file too, or stale code runs (last: _plane_status cuts a straddling set,
+# touching is not covering, _next_occluder's hull planes; 2026-12-04).
 from ._exact_kernel import _classify_one, _lambert, _mean_vertex, _next_occluder, _point_hidden, union_scratch
 
 
@@ -84,7 +84,7 @@ def _classify_hull(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, nod
     stack[0] = 0
     while True:
         top, pos, end, kk = _next_occluder(stack, top, pos, end, lo, hi, olo, ohi, node_lo, node_hi, node_left,
-                                           node_right, node_start, node_count, order, pad)
+                                           node_right, node_start, node_count, order, pad, caps[:0, :4], 0)
         if kk < 0:
             break
         if stamp_id >= 0:
@@ -93,8 +93,7 @@ def _classify_hull(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, nod
                 stamp[kk] = stamp_id
             if not _caps_meet(caps[kk], src_cap):
                 continue
-        state = _classify_one(vi, vj, polys, normal, center, inward, kk, tol, si, sj, outside, valid, gi,
-                                   gj)
+        state = _classify_one(vi, vj, polys, normal, center, inward, kk, tol, si, sj, outside, valid, gi, gj)
         if state == 1:
             return 1, 0
         if state == 2:
