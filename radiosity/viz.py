@@ -135,6 +135,9 @@ _VIEW_ANGLE_USER = 50.0
 _ROOM_FRONT_SHARE = 0.6
 # ... and the room is closed when at most this share escapes (else its open side is looked through).
 _ROOM_OPEN_SHARE = 0.05
+# ... and is no room at all when this share escapes in no one direction: under the lamp of a
+# 50 m terrain 45% of the rays leave sideways, and the view "inside" looked straight down.
+_OPEN_ALL_ROUND_SHARE = 0.25
 # Rays per viewpoint: 256, fewer on big scenes (at least 64) so a probe stays near 4e7
 # ray-triangle tests (about a second).
 _PROBE_RAYS = 256
@@ -223,7 +226,8 @@ def auto_camera(triangles: np.ndarray) -> Camera | None:
     -------
     Camera or None
         None when no point of the scene's box sees mostly front faces (objects seen from
-        outside): the caller's exterior view shows them.
+        outside), or when the light leaves such points all round (a terrain): the caller's
+        exterior view shows them.
 
     Notes
     -----
@@ -263,8 +267,10 @@ def auto_camera(triangles: np.ndarray) -> Camera | None:
     # the mean escaping direction points out through the opening (unless it leaks all round).
     if len(out) > _ROOM_OPEN_SHARE * n_rays * len(escaping) and np.linalg.norm(out.mean(axis=0)) > 0.3:
         return _through_opening(out.mean(axis=0), lo, hi)
-    return _inside(lo, hi, triangles, offset, directions) or Camera(tuple(point), tuple(center), (0.0, 1.0, 0.0),
-                                                       _VIEW_ANGLE_INSIDE, "inside the room")
+    if len(out) > _OPEN_ALL_ROUND_SHARE * n_rays * len(escaping):
+        return None  # light leaves all round (a terrain under a lamp): no room to stand in
+    return _inside(lo, hi, triangles, offset, directions) or Camera(
+        tuple(point), tuple(center), _up_for(center - point), _VIEW_ANGLE_INSIDE, "inside the room")
 
 
 def _axis(vector) -> np.ndarray:

@@ -332,6 +332,23 @@ def test_closed_room_is_seen_from_inside_and_a_box_from_outside(tmp_path):
     assert (auto_camera(_triangles(box.patch_quads)[0]) is not None) == expected_room
 
 
+def test_terrain_under_a_lamp_is_seen_from_outside():
+    """A ground of hills with a lamp above it: points under the lamp see mostly fronts (ground and
+    lamp), but the light leaves them all round. It is no room: the exterior view (None), not a
+    camera under the lamp looking straight down along its up vector (a black picture)."""
+    g = np.linspace(0.0, 20.0, 21)
+    x, z = np.meshgrid(g, g)
+    y = 0.3 * np.sin(x / 3.0) * np.cos(z / 4.0)
+    v = np.stack([x, y, z], axis=-1)
+    a, b, c, d = v[:-1, :-1], v[1:, :-1], v[1:, 1:], v[:-1, 1:]  # wound to face +y
+    ground = np.concatenate([np.stack([a, b, c], axis=-2).reshape(-1, 3, 3),
+                             np.stack([a, c, d], axis=-2).reshape(-1, 3, 3)])
+    lamp = np.array([[[8, 4, 8], [12, 4, 8], [12, 4, 12]], [[8, 4, 8], [12, 4, 12], [8, 4, 12]]], float)
+    up = np.cross(ground[:, 1] - ground[:, 0], ground[:, 2] - ground[:, 0])[:, 1]
+    assert (up > 0).all()
+    assert auto_camera(np.concatenate([ground, lamp])) is None
+
+
 def test_pictures_of_a_closed_room_show_its_inside(tmp_path, capsys):
     """From outside, a closed room's picture shows the back of its walls around a background;
     the automatic camera is inside, so walls fill the frame and the boxes are in view."""
