@@ -875,10 +875,11 @@ MAX_HULL_PLANES = 34  # both patches' planes and every (edge of one, vertex of t
 @njit(cache=True, inline="always")
 def _hull_planes(vi, vj, planes, tol):
     """Face planes of the hull of the 8 vertices of two quads, into planes (unit n, d: the hull
-    lies where n . x <= d + tol); returns how many. Candidates: each quad's plane and each plane
-    through an edge of one and a vertex of the other (the faces of the hull of two convex
-    polygons); a candidate with points on both sides is not a face and is skipped. Any subset of
-    the faces bounds a region holding the hull, so a degenerate candidate may be left out."""
+    lies where n . x <= d, d moved out by tol); returns how many. Candidates: each quad's plane
+    and each plane through an edge of one and a vertex of the other (the faces of the hull of
+    two convex polygons); a candidate with points on both sides is not a face and is skipped.
+    Any subset of the faces bounds a region holding the hull, so a degenerate candidate (a
+    triangle's repeated vertex) may be left out."""
     n = 0
     for side in range(2):
         A = vi if side == 0 else vj
@@ -886,10 +887,10 @@ def _hull_planes(vi, vj, planes, tol):
         for a in range(4):
             a1 = (a + 1) % 4
             e0, e1, e2 = A[a1, 0] - A[a, 0], A[a1, 1] - A[a, 1], A[a1, 2] - A[a, 2]
-            for b in range(5):  # b = 4: the quad's own plane (its next vertex after the edge)
-                P = A[(a + 2) % 4] if b == 4 else B[b]
+            for b in range(5):  # b = 4: the quad's own plane (once, from its first edge)
                 if b == 4 and a > 0:
                     continue
+                P = A[2] if b == 4 else B[b]
                 w0, w1, w2 = P[0] - A[a, 0], P[1] - A[a, 1], P[2] - A[a, 2]
                 n0, n1, n2 = e1 * w2 - e2 * w1, e2 * w0 - e0 * w2, e0 * w1 - e1 * w0
                 length = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
@@ -909,7 +910,8 @@ def _hull_planes(vi, vj, planes, tol):
                     sign = -1.0
                 else:
                     continue
-                planes[n, 0], planes[n, 1], planes[n, 2], planes[n, 3] = sign * n0, sign * n1, sign * n2, sign * d
+                planes[n, 0], planes[n, 1], planes[n, 2] = sign * n0, sign * n1, sign * n2
+                planes[n, 3] = sign * d + tol  # the hull's points lie within tol of the face
                 n += 1
     return n
 
