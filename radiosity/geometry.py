@@ -71,6 +71,8 @@ def _vector_area_small(poly: np.ndarray) -> np.ndarray:
     it there): numpy reduces axis 0 row after row, so these sums run in the same order."""
     rows = poly.tolist()
     k = len(rows)
+    if k < 3:  # no area (a face left with one or two corners: the fuzzer's zero-area faces)
+        return np.zeros(3)
     mx, my, mz = rows[0]
     for x, y, z in rows[1:]:
         mx += x

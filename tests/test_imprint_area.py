@@ -200,3 +200,15 @@ def test_lamp_under_the_ceiling_of_a_one_object_room_stays_lit():
     ceiling = patches.patch_face == 1
     hidden_ceiling = sum(np.linalg.norm(_newell(q)) for q in patches.quads[ceiling & patches.patch_hidden])
     assert hidden_ceiling == pytest.approx(0.04, rel=1e-9)  # the ceiling behind the lamp
+
+
+@pytest.mark.parametrize("corners", [0, 1, 2])
+def test_faces_left_with_fewer_than_three_corners_have_no_area(corners):
+    """A zero-area face reduced to one or two corners (the fuzzer's) has vector area 0, as in
+    geometry.vector_areas, instead of an IndexError from inside the load."""
+    from radiosity.geometry import vector_areas
+
+    poly = np.arange(3.0 * corners).reshape(corners, 3)
+    np.testing.assert_array_equal(_newell(poly), np.zeros(3))
+    if corners:
+        np.testing.assert_array_equal(vector_areas(poly[None])[0], np.zeros(3))

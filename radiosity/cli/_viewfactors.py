@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from ..enclosure import diagnose
+from ..enclosure import NotClosedError, diagnose
 from ..factors import GROUPINGS
 from ..io.export import atomic_paths, save_arrays, view_factor_arrays, write_vf
 from ..io.view3d import write_vs3
@@ -82,8 +82,11 @@ def run(args) -> int:
     scene = load(args)
     if args.out_of_core:
         return _run_out_of_core(scene, args)
-    vf = compute_view_factors(scene, preset=args.preset, enforce=args.enforce, force=args.force,
-                              error_estimate=args.error_estimate, **overrides(args), **cluster_overrides(args))
+    try:
+        vf = compute_view_factors(scene, preset=args.preset, enforce=args.enforce, force=args.force,
+                                  error_estimate=args.error_estimate, **overrides(args), **cluster_overrides(args))
+    except NotClosedError as exc:  # the refusal names the scene it is about, as every input error does
+        raise NotClosedError(f"{Path(scene.source).name}: {exc}") from None
     cut = vf.scene
     grouped = vf.grouped(args.group_by) if args.group_by else None
     arrays = view_factor_arrays(vf, grouped=grouped)
