@@ -18,12 +18,12 @@ RadiosityError, SceneError, MemoryBudgetError, RadiosityWarning
 __version__         -- the installed package's version (from its metadata)
 """
 
-from importlib.metadata import PackageNotFoundError as _NotInstalled
-from importlib.metadata import version as _version
-
-from ._startup import guard_imports
+from ._startup import guard_imports  # first: a signal from here on ends with one line
 
 with guard_imports():  # Ctrl-C during these seconds of imports: one line and exit 130
+    from importlib.metadata import PackageNotFoundError as _NotInstalled
+    from importlib.metadata import version as _version
+
     from ._errors import MemoryBudgetError, RadiosityError, RadiosityWarning, SceneError
     from .exchange import Exchange, exchange
     from .factors import ViewFactors
