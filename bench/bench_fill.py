@@ -17,7 +17,7 @@ exact values (FIELD_NOTES.md): 0.1998248957 open (Howell C-11), 0.0995062946 blo
 Without ``--view3d`` the baseline is the kernel's own ceiling: the bare raw-sum Lambert kernel of
 bench_formfactors (no clipping, no far form, no checks) evaluating one point per pair, i.e. what
 the fill would cost if each pair were a single kernel evaluation and nothing else.
-``--threads`` also times our open n = 32 case on 1 and 2 threads (``numba.set_num_threads``).
+``--threads`` also times our open and blocked n = 32 cases on 1 and 2 threads (``numba.set_num_threads``).
 ``--omp-wait-policy`` (default ``PASSIVE``, what the ``radiosity`` command sets for itself, see
 ``radiosity._startup``) sets ``OMP_WAIT_POLICY`` before numba starts its threads; ``unset``
 leaves the environment's (a Python program importing radiosity: libgomp's spin-then-sleep).
@@ -164,25 +164,29 @@ def _row(case, n, method, runs):
 
 
 def thread_scaling(repeats: int, folder: Path) -> list[dict]:
-    """Our open n = 32 fill on 1 and 2 threads, interleaved."""
+    """Our open and blocked n = 32 fills on 1 and 2 threads, interleaved."""
     import numba
 
     import radiosity
 
-    model = folder / "plates_open_32.vs3"
-    write_model(plates(32, False), 0, model, VIEW3D_EPS)
-    scene = radiosity.load_scene(model)
     counts = [c for c in (1, 2) if c <= numba.config.NUMBA_NUM_THREADS]
-    times = {c: [] for c in counts}
-    run_ours(scene, "open")
-    for _ in range(repeats):
-        for c in counts:
-            numba.set_num_threads(c)
-            times[c].append(run_ours(scene, "open")[0])
-    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
-    one = min(times[1])
-    return [{"threads": c, "seconds": statistics.median(times[c]), "best": min(times[c]), "runs": times[c],
-             "speedup": one / min(times[c])} for c in counts]
+    rows = []
+    for case in ("open", "blocked"):
+        blocked = case == "blocked"
+        model = folder / f"plates_{case}_32.vs3"
+        write_model(plates(32, blocked), int(blocked), model, VIEW3D_EPS)
+        scene = radiosity.load_scene(model)
+        times = {c: [] for c in counts}
+        run_ours(scene, case)
+        for _ in range(repeats):
+            for c in counts:
+                numba.set_num_threads(c)
+                times[c].append(run_ours(scene, case)[0])
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+        one = min(times[1])
+        rows += [{"case": case, "threads": c, "seconds": statistics.median(times[c]), "best": min(times[c]),
+                  "runs": times[c], "speedup": one / min(times[c])} for c in counts]
+    return rows
 
 
 def main(argv=None):
@@ -210,7 +214,8 @@ def main(argv=None):
     print_table(rows, ["case", "n", "method", "best", "seconds", "error", "ratio", "median_ratio"],
                 title="Plates 1 apart, n x n each (best and median wall seconds; ratio = baseline / ours, of the bests)")
     if scaling:
-        print_table(scaling, ["threads", "best", "seconds", "speedup"], title="Open n = 32, ours on 1 and 2 threads")
+        print_table(scaling, ["case", "threads", "best", "seconds", "speedup"],
+                    title="n = 32, ours on 1 and 2 threads")
     path = write_json("fill", {"exact": EXACT, "ours": OURS, "view3d_eps": VIEW3D_EPS,
                                "omp_wait_policy": os.environ.get("OMP_WAIT_POLICY", "unset"),
                                "view3d": args.view3d, "rows": rows, "threads": scaling}, args.out)
