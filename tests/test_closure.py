@@ -58,10 +58,11 @@ def test_convex_body_inside_a_closed_prism_sees_all_of_it(concentric_prisms):
     np.testing.assert_allclose(rows[inner], 1.0, atol=1e-6)
 
 
-@pytest.mark.xfail(strict=True, reason="shell rows 0.999993-1.000002: pairs behind more than 4 occluders take "
-                   "receiver squares refined along the shadows' edges (at most 6 levels), not the shadow-aligned "
-                   "cells; closed-object culling leaves the caps' triangles, see docs/visibility.md")
 def test_closed_prism_shell_rows_close(concentric_prisms):
+    """The outer shell's rows (its walls 0.77 x 4.8 m, its caps fans of triangles) close too.
+    Before 2026-12-04 they were 2.9-6.7e-6 from 1: the walls' receiver squares were as
+    elongated as the walls at every level, and the caps' shadow cells missed their a-priori
+    bound (rtol 1e-7 per triangle, errors of 7e-7 on a cap-to-wall factor)."""
     scene, F = concentric_prisms
     rows = np.asarray(F.sum(axis=1)).ravel()
     np.testing.assert_allclose(rows, 1.0, atol=1e-6)
@@ -239,3 +240,38 @@ def test_a_penumbra_between_the_receivers_points_is_found():
     np.testing.assert_allclose(seen, reference.mean(), rtol=5e-4)
     blind = unocc - vis.adaptive_hidden(i, j, rows, occ, 1e-7)
     assert blind[0] < 0.98 * reference.mean()  # without the test the receiver side misses it
+
+
+# ---------------------------------------------------------------- closed rooms of cubes, one patch a face
+def test_closed_room_of_cubes_rows_close_at_view_factors_defaults():
+    """A closed unit room holding four floating cubes, one patch per face (a coarse thermal
+    model): rows sum to 1 and reciprocity holds without enforcing either. Before 2026-12-04 the
+    worst row was 9.8e-6 from 1: a penumbra on a wall passed between the adaptive squares' points
+    below their third level (F(wall -> wall) 1.6e-5 high in the eight-cube room), and
+    a small face's row took the mirrored error of its factors to the walls."""
+    from helpers import cube_room_scene
+
+    scene = cube_room_scene(4, seed=2)
+    F = radiosity.view_factors(scene, cache=False)
+    rows = np.asarray(F.sum(axis=1)).ravel()
+    np.testing.assert_allclose(rows, 1.0, atol=4e-6)  # 1.6e-6 measured
+    area = scene.patch_area
+    AF = F.multiply(area[:, None]).toarray()
+    np.testing.assert_allclose(AF, AF.T, atol=1e-12 * area.max())
+
+
+def test_a_small_patch_receives_from_a_much_larger_one():
+    """On a 3 m wall the shadows a 0.15 m face casts through clutter are a few cm wide and passed
+    between the squares' points: F(face -> wall) came out 5e-5 high whatever the tolerance. The
+    smaller patch receives when the widths differ by more than RECEIVE_SMALLER_WIDTHS."""
+    from radiosity.visibility._constants import RECEIVE_SMALLER_WIDTHS
+
+    wall = np.array([[0, 0, 0], [3, 0, 0], [3, 3, 0], [0, 3, 0]], float)  # facing +z
+    face = np.array([[1.4, 1.4, 1.5], [1.4, 1.55, 1.5], [1.55, 1.55, 1.5], [1.55, 1.4, 1.5]])  # facing -z
+    blocker = np.array([[1.45, 1.45, 1.0], [1.45, 1.5, 1.0], [1.5, 1.5, 1.0], [1.5, 1.45, 1.0]])  # facing -z
+    vis = make_vis(np.array([wall, face, blocker]))
+    i, j = np.array([0, 1]), np.array([1, 0])
+    status, rows, occ = vis.classify(i, j)
+    assert (status == radiosity.visibility.MAYBE).all()
+    assert RECEIVE_SMALLER_WIDTHS < 3 / 0.15
+    np.testing.assert_array_equal(vis.receive_on_source(i, j, rows, occ), [True, False])  # the face receives

@@ -84,10 +84,11 @@ def split_patch_points(quads: np.ndarray, order: int, splits: int) -> tuple[np.n
 
 def square_cell_points(quads: np.ndarray, u0: np.ndarray, v0: np.ndarray, size: np.ndarray, order: int
                        ) -> tuple[np.ndarray, np.ndarray]:
-    """Gauss points on parameter squares ``[u0, u0 + size] x [v0, v0 + size]`` of patches.
+    """Gauss points on parameter cells ``[u0, u0 + su] x [v0, v0 + sv]`` of patches.
 
     The cell-by-cell form of :func:`split_patch_points`, for adaptive receiver integrals: row c
-    is the square of patch ``quads[c]`` (n, 4, 3) at ``u0[c], v0[c]`` with side ``size[c]``.
+    is the cell of patch ``quads[c]`` (n, 4, 3) at ``u0[c], v0[c]`` with sides ``size[c]``,
+    (n,) for squares or (n, 2) for ``(su, sv)``.
 
     Returns
     -------
@@ -96,18 +97,26 @@ def square_cell_points(quads: np.ndarray, u0: np.ndarray, v0: np.ndarray, size: 
         Weights sum to each cell's area.
     """
     nodes, w = gauss_legendre_01(order)
-    u = u0[:, None] + size[:, None] * np.repeat(nodes, order)[None, :]
-    v = v0[:, None] + size[:, None] * np.tile(nodes, order)[None, :]
-    wuv = (np.repeat(w, order) * np.tile(w, order))[None, :] * (size * size)[:, None]
+    su, sv = _cell_sides(size)
+    u = u0[:, None] + su[:, None] * np.repeat(nodes, order)[None, :]
+    v = v0[:, None] + sv[:, None] * np.tile(nodes, order)[None, :]
+    wuv = (np.repeat(w, order) * np.tile(w, order))[None, :] * (su * sv)[:, None]
     points, jac = _map_square(quads, u, v)
     return points, jac * wuv
 
 
 def square_cell_corners(quads: np.ndarray, u0: np.ndarray, v0: np.ndarray, size: np.ndarray) -> np.ndarray:
-    """(n, 4, 3) corners of the parameter squares of :func:`square_cell_points`, in the patches' order."""
-    u = u0[:, None] + size[:, None] * np.array([0.0, 1.0, 1.0, 0.0])[None, :]
-    v = v0[:, None] + size[:, None] * np.array([0.0, 0.0, 1.0, 1.0])[None, :]
+    """(n, 4, 3) corners of the parameter cells of :func:`square_cell_points`, in the patches' order."""
+    su, sv = _cell_sides(size)
+    u = u0[:, None] + su[:, None] * np.array([0.0, 1.0, 1.0, 0.0])[None, :]
+    v = v0[:, None] + sv[:, None] * np.array([0.0, 0.0, 1.0, 1.0])[None, :]
     return _map_square(quads, u, v)[0]
+
+
+def _cell_sides(size: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The (u, v) sides of parameter cells given as one side each (squares) or two."""
+    size = np.asarray(size, dtype=float)
+    return (size, size) if size.ndim == 1 else (size[:, 0], size[:, 1])
 
 
 def _map_square(quads: np.ndarray, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -64,7 +64,7 @@ CHUNK_CELL_PAIRS = 65_536
 
 # The exact shadows' Gauss orders aim at this share of the fill's ``formfactor_rtol`` (the
 # a-priori bound is not a guarantee; the unoccluded factor's own error adds to it).
-SHADOW_RTOL_SHARE = 0.1
+SHADOW_RTOL_SHARE = 0.01
 
 
 # Fills whose formfactor_rtol and visibility_rtol are both below this (view_factors' 1e-6 and
@@ -98,16 +98,37 @@ WINDING_BUDGET = 50_000_000
 # 1.5e-7 / 1.8e-8 now (tests/test_assembly.py). At 0.3 the Cornell box's default fill took
 # 10.3 s instead of 14.6 s, but the corpus room's worst row went from 5.7e-4 to 9.8e-4 off.
 SHADOW_ATOL_SHARE = 0.1
+# ... and this share in fills tight enough for the cells (view_factors, where closed models
+# must close to 1e-6): a wall-to-wall pair behind 47 occluders passed at 0.1 with its 2 x 2 rule
+# and its children agreeing by chance, 1.3e-6 off. The furnace room of 20 boxes: worst row
+# 2.5e-6 -> 1.3e-6 off, 77 s -> 117 s.
+SHADOW_ATOL_SHARE_TIGHT = 0.01
 SHADOW_CELL_ORDER = 2
+# ... starting from about square cells, at most this many along an elongated patch's length
+# (``Visibility._root_cells``).
+MAX_ROOT_CELLS = 16
 # A receiver point counts as lit (or in full shadow) when its hidden factor is within this
 # fraction of its unoccluded factor of 0 (or of all of it): the adaptive squares test a square
 # whose points all agree so for a penumbra passing between them.
 SATURATED_REL = 1e-9
 # ... down to this many levels, and only in fills tight enough for the cells (view_factors):
-# 12-sided concentric prisms' worst row went from 1.4e-4 to 6.3e-6 off in the same time (38 s
-# -> 36 s; 6 levels: 85 s for the same rows). In the Cornell box's default fill (all levels)
-# it cost over 10 minutes and 10 GB instead of seconds.
-SHADOW_PENUMBRA_DEPTH = 3
+# 12-sided concentric prisms' worst row went from 1.4e-4 to 6.3e-6 off at 3 levels in the same
+# time (38 s -> 36 s); rooms of 8 floating cubes, one patch a face, from 2.1-2.8e-5 at 3 levels
+# to 3.2-4.4e-6 at 5 (a penumbra on a wall passing between the points of adjacent walls' squares;
+# F(wall -> wall) 1.6e-5 high). The prisms gain nothing past 3 (15 s -> 36 s at 5). In the
+# Cornell box's default fill (all levels) it cost over 10 minutes and 10 GB instead of seconds.
+SHADOW_PENUMBRA_DEPTH = 5
+# ... where, too, a cell is split when the hidden factor at one of its corners misses the
+# polynomial through its children's points by more than its tolerance over this share of its
+# area: a kink between the outermost points and the cell's side lies in a band about 0.1 of the
+# side wide (order 2: the children's outer points are 0.106 of the side from it).
+KINK_BAND = 0.1
+# A pair whose patches' widths (sqrt of the area) differ by more than this factor integrates
+# its shadow over the smaller patch (``Visibility.receive_on_source``), whatever the penumbra
+# rule says: on a 3 m wall the shadows a 0.15 m box face casts through clutter are features a
+# few cm wide that passed between the squares' points at every depth (F(face -> wall) 5e-5 off
+# at any tolerance, mirrored into the face's row; integrated over the face, 3e-8).
+RECEIVE_SMALLER_WIDTHS = 4.0
 # ... and the cells' pairs whose lines, cells or unions ran out to ``rtol`` times their factor,
 # but never below this absolute error (issue 13's 1e-9 bound for an entry, with margin).
 CELL_FALLBACK_ATOL = 1e-10

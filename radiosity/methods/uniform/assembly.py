@@ -155,8 +155,8 @@ def _apply_visibility(f, quads, centroid, area, i, j, visibility, settings: Fill
     """
     from ...visibility import FULL, MAYBE
     from ...visibility._constants import (AUTO_EXACT_ATOL, AUTO_EXACT_OCCLUDERS, MAX_CELL_OCCLUDERS,
-                                          SHADOW_ATOL_SHARE, SHADOW_CELL_ORDER, SHADOW_CELLS_BELOW,
-                                          SHADOW_PENUMBRA_DEPTH, SHADOW_RTOL_SHARE)
+                                          SHADOW_ATOL_SHARE, SHADOW_ATOL_SHARE_TIGHT, SHADOW_CELL_ORDER,
+                                          SHADOW_CELLS_BELOW, SHADOW_PENUMBRA_DEPTH, SHADOW_RTOL_SHARE)
 
     if visibility.cull and visibility.n_occluders == 0:  # nothing can block: every pair is free
         return
@@ -226,16 +226,18 @@ def _apply_visibility(f, quads, centroid, area, i, j, visibility, settings: Fill
         if exact.any():
             sel = np.flatnonzero(exact)
             unocc = f[nz[part[sel]]]
-            atol = SHADOW_ATOL_SHARE * _shadow_atol(settings)
+            atol = (SHADOW_ATOL_SHARE_TIGHT if tight else SHADOW_ATOL_SHARE) * _shadow_atol(settings)
             sub_rows, sub_occ = subset(sel)
-            # integrated over the patch where the shadow is smoother; from j, the error of
-            # F(i -> j) = A_j F(j -> i) / A_i grows by A_j / A_i, so j's target shrinks by it
+            # integrated over the patch where the shadow is smoother. The receiver's factor is
+            # mirrored to the source's row by reciprocity, its error scaled by A_recv / A_src:
+            # both directions meet atol when the receiver's target is atol min(1, A_src / A_recv)
             ri, rj = pi[sel], pj[sel]
             flip = visibility.receive_on_source(ri, rj, sub_rows, sub_occ) & (area[ri] > 0)
-            ratio = np.where(flip, area[rj] / area[ri], 1.0)
-            hidden = visibility.adaptive_hidden(np.where(flip, rj, ri), np.where(flip, ri, rj),
-                                                sub_rows, sub_occ, atol / ratio, order=SHADOW_CELL_ORDER,
+            recv, src = np.where(flip, rj, ri), np.where(flip, ri, rj)
+            target = atol * np.minimum(1.0, area[src] / np.where(area[recv] > 0, area[recv], 1.0))
+            hidden = visibility.adaptive_hidden(recv, src, sub_rows, sub_occ, target, order=SHADOW_CELL_ORDER,
                                                 penumbra_depth=SHADOW_PENUMBRA_DEPTH if tight else 0)
+            ratio = np.where(flip, area[rj] / area[ri], 1.0)  # F(i -> j) = A_j F(j -> i) / A_i
             frac[sel] = _seen_fraction(unocc, hidden * ratio)
     f[nz[part]] *= frac
 
