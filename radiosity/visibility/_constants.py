@@ -63,7 +63,10 @@ SNAP_REL = 1e-12
 CHUNK_CELL_PAIRS = 65_536
 
 # The exact shadows' Gauss orders aim at this share of the fill's ``formfactor_rtol`` (the
-# a-priori bound is not a guarantee; the unoccluded factor's own error adds to it).
+# a-priori bound is not a guarantee; the unoccluded factor's own error adds to it). It holds per
+# triangle of the shadow cells, and their errors add: at 0.1 a closed 8-sided prism's cap
+# triangles took factors to the walls 7e-7 high (rows 2.9e-6 over 1); at 0.01 the rows are
+# within 4.2e-7, for 1.1x the matrix's time.
 SHADOW_RTOL_SHARE = 0.01
 
 
