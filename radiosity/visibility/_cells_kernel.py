@@ -204,7 +204,9 @@ def _pair_hidden(rec, nr, src, sn, occ, t0, t1, opolys, onormal, ocenter, oinwar
     """Mean over the receiver (its part in front of the source) of the hidden form factor.
 
     Returns (hidden, ok, points); ok is False where a point needed shapely (more than
-    max_union hidden polygons) or the lines, cells or triangles ran out.
+    max_union hidden polygons), the lines, cells or triangles ran out, or the budget of
+    max_points cut a triangle's order below what the bound asks (a strip of floor behind a
+    desk, its edge on the desk's back face: 15% low at rtol 1e-9 and 4,096 points, silently).
     """
     (a, b, s1, s2, hp, hn, levels, lcount, nxt, sa, sb, lines, cells, ccount, tmp, tris, tdepth, segs) = work
     (tri3, locc, pocc, si, sj, outside, valid, gi, gj) = work2
@@ -429,7 +431,8 @@ def _pair_hidden(rec, nr, src, sn, occ, t0, t1, opolys, onormal, ocenter, oinwar
             p = 2
         # the budget: no split once pending triangles would take it, and orders shrink to share it
         room = max_points - done
-        if p == 0 and dep < MAX_DEPTH and n_tris + 4 <= tris.shape[0] and room > 4 * (n_tris + 4):
+        affordable = n_tris + 4 <= tris.shape[0] and room > 4 * (n_tris + 4)
+        if p == 0 and dep < MAX_DEPTH and affordable:
             m01u, m01w = 0.5 * (u0 + u1), 0.5 * (w0 + w1)
             m12u, m12w = 0.5 * (u1 + u2), 0.5 * (w1 + w2)
             m20u, m20w = 0.5 * (u2 + u0), 0.5 * (w2 + w0)
@@ -446,8 +449,11 @@ def _pair_hidden(rec, nr, src, sn, occ, t0, t1, opolys, onormal, ocenter, oinwar
             continue
         if p == 0:
             p = _ORDERS[len(_ORDERS) - 1]
+            if dep < MAX_DEPTH:  # the bound asked for a split the budget could not pay
+                ok = False
         while p > 1 and p * p * (n_tris + 1) > room:
             p -= 1
+            ok = False  # an order below the bound's: the caller falls back to adaptive squares
         done += p * p
         # collapsed-square Gauss rule on the triangle (vertex 0 is the collapsed one)
         for ia in range(p):
@@ -510,8 +516,8 @@ def cell_pairs(quads, normals, i, j, starts, occ, opolys, onormal, ocenter, oinw
         Mean over receiver i of F(x -> the part of j hidden from x), over x in front of j's
         plane (points behind it see j's back: nothing).
     ok : (m,) bool
-        False where the lines, cells, triangles or the compiled union ran out (the caller falls
-        back to fixed points).
+        False where the lines, cells, triangles, the compiled union or the point budget ran out
+        (the caller falls back to adaptive squares).
     points : (m,) int
         Receiver points evaluated.
     """

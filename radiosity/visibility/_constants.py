@@ -135,3 +135,7 @@ RECEIVE_SMALLER_WIDTHS = 4.0
 # ... and the cells' pairs whose lines, cells or unions ran out to ``rtol`` times their factor,
 # but never below this absolute error (issue 13's 1e-9 bound for an entry, with margin).
 CELL_FALLBACK_ATOL = 1e-10
+# A pair whose cells ran out of their point budget first tries again with this many times the
+# budget (a floor patch crossed by a partition's foot took 54k points for 1e-11; squares, which
+# resolve the jump there at first order, left its factor to a wall 3.6e-4 low).
+CELL_RETRY_POINTS = 16

@@ -216,7 +216,8 @@ def _apply_visibility(f, quads, centroid, area, i, j, visibility, settings: Fill
             # the hidden part over receiver cells cut along the shadow's edges: F = F_unoccluded - hidden
             unocc = f[nz[part[sel]]]
             hidden = visibility.exact_hidden(pi[sel], pj[sel], *subset(sel),
-                                             SHADOW_RTOL_SHARE * settings.formfactor_rtol, unocc)
+                                             SHADOW_RTOL_SHARE * settings.formfactor_rtol, unocc,
+                                             penumbra_depth=SHADOW_PENUMBRA_DEPTH)
             frac[sel] = _seen_fraction(unocc, hidden)
             exact = exact & ~cells
         # the rest: exact shadows on receiver cells refined where the hidden factor varies, far
