@@ -466,3 +466,29 @@ def axis_box(lo, hi, *, inward: bool) -> list[np.ndarray]:
                 quad = quad[::-1].copy()
             faces.append(quad)
     return faces
+
+
+def office_scene(path):
+    """A furnished office as thermal users model it, one patch per surface: a closed 4 x 3 x 2.5 m
+    room (z up) with a door and a window in the south wall (y = 0, the wall cut around them), a
+    desk and a cabinet standing on the floor (the cabinet in the north-east corner, touching
+    both walls), and a two-sided partition standing on the floor. Returns the loaded scene."""
+    import warnings
+
+    import radiosity
+
+    def south(x0, x1, z0, z1):  # facing +y, into the room
+        return np.array([[x0, 0, z0], [x0, 0, z1], [x1, 0, z1], [x1, 0, z0]], float)
+
+    walls = [q for q in axis_box([0, 0, 0], [4, 3, 2.5], inward=True) if np.abs(q[:, 1]).max() > 0]
+    partition = np.array([[1.0, 0.8, 0.0], [1.0, 2.2, 0.0], [1.0, 2.2, 1.6], [1.0, 0.8, 1.6]])
+    objects = {"walls": walls,
+               "south": [south(0, 0.5, 0, 2.5), south(0.5, 1.4, 2, 2.5), south(1.4, 2, 0, 2.5), south(2, 3.5, 0, 1),
+                         south(2, 3.5, 2, 2.5), south(3.5, 4, 0, 2.5)],
+               "door": [south(0.5, 1.4, 0, 2)], "window": [south(2, 3.5, 1, 2)],
+               "desk": axis_box([1.5, 1.8, 0.0], [2.7, 2.4, 0.75], inward=False),
+               "cabinet": axis_box([3.4, 2.5, 0.0], [4.0, 3.0, 1.8], inward=False),
+               "partition": [partition, partition[::-1].copy()]}
+    with warnings.catch_warnings():  # no emitter: a note says so
+        warnings.simplefilter("ignore", radiosity.RadiosityWarning)
+        return radiosity.load_scene(write_obj(path, objects))

@@ -275,3 +275,97 @@ def test_a_small_patch_receives_from_a_much_larger_one():
     assert (status == radiosity.visibility.MAYBE).all()
     assert RECEIVE_SMALLER_WIDTHS < 3 / 0.15
     np.testing.assert_array_equal(vis.receive_on_source(i, j, rows, occ), [True, False])  # the face receives
+
+
+# ---------------------------------------------------------------- coarse thermal models close
+def test_furnished_office_rows_close_one_patch_a_surface(tmp_path):
+    """Door and window in a wall, a desk and a cabinet on the floor, a two-sided partition, one
+    patch per surface (tests/helpers.office_scene): the rows of the surfaces that see the room
+    sum to 1 without enforcement. Before 2026-12-04 the worst was 2.3e-3 from 1: shadow cells
+    that ran out of points shrank their orders silently (a floor strip behind the desk saw the
+    east wall 14% too little), and the squares they fell back to had no penumbra test."""
+    from helpers import office_scene
+
+    vf = radiosity.compute_view_factors(office_scene(tmp_path / "office.obj"), cache=False)
+    active = np.asarray(vf.active)
+    assert (~active).sum() == 8  # under the desk and the cabinet, behind the cabinet, its back and bottom
+    np.testing.assert_allclose(vf.row_sums[active], 1.0, atol=1.5e-5)  # 5.8e-6 measured
+    area = vf.scene.patch_area
+    AF = vf.F.multiply(area[:, None]).toarray()
+    np.testing.assert_allclose(AF, AF.T, atol=1e-12 * area.max())
+
+
+def _strip_behind_a_desk():
+    """A floor strip whose edge lies on a desk's back face, a wall beside them, and the desk's
+    back face between (the office's pair that lost 14% of its factor)."""
+    strip = np.array([[1.5, 2.4, 0.0], [2.7, 2.4, 0.0], [2.7, 2.5, 0.0], [1.5, 2.5, 0.0]])  # facing +z
+    wall = np.array([[4.0, 0.0, 0.0], [4.0, 0.0, 1.8], [4.0, 2.5, 1.8], [4.0, 2.5, 0.0]])  # facing -x
+    desk_back = np.array([[1.5, 2.4, 0.75], [2.7, 2.4, 0.75], [2.7, 2.4, 0.0], [1.5, 2.4, 0.0]])  # facing +y
+    return make_vis(np.array([strip, wall, desk_back]))
+
+
+def test_shadow_cells_out_of_points_say_so_and_the_fill_recovers():
+    from radiosity.formfactors import polygon_to_polygon
+
+    vis = _strip_behind_a_desk()
+    i, j = np.array([0]), np.array([1])
+    status, rows, occ = vis.classify(i, j)
+    assert status[0] == radiosity.visibility.MAYBE
+    starts = np.array([0, len(occ)])
+    _, ok = vis._cell_pairs(i, j, starts, occ, 1e-9, 4096)
+    assert not ok[0]  # the bound asked for more than 4,096 points
+    reference, ok = vis._cell_pairs(i, j, starts, occ, 1e-11, 200_000)
+    assert ok[0]
+    unocc = polygon_to_polygon(vis.quads[0], vis.quads[1], rtol=1e-12)
+    hidden = vis.exact_hidden(i, j, rows, occ, 1e-9, np.array([unocc]))
+    np.testing.assert_allclose(hidden, reference, atol=1e-9)  # 0.0022 off before
+    np.testing.assert_allclose(unocc - hidden[0], 0.0158445, atol=1e-7)  # the same from the wall's side
+
+
+def test_a_kink_past_the_outermost_points_is_found():
+    """A cube face's factor to the ceiling of a closed room of cubes: at the third level a row of
+    squares had the kink where a shadow starts between their outermost points and their side,
+    and their rule agreed with their children's (F 1.6e-6 high at any tolerance). Each
+    square's corners are now checked against its children's polynomial."""
+    from helpers import cube_room_scene
+    from radiosity.formfactors import polygon_to_polygon
+
+    scene = cube_room_scene(4, seed=2)
+    vis = make_vis(scene.patch_quads, scene.patch_object)
+    i, j = np.array([15]), np.array([3])
+    _, rows, occ = vis.classify(i, j)
+    unocc = polygon_to_polygon(scene.patch_quads[15], scene.patch_quads[3], rtol=1e-12)
+    seen = unocc - vis.adaptive_hidden(i, j, rows, occ, 1e-8, penumbra_depth=5)[0]
+    np.testing.assert_allclose(seen, 0.2360046, atol=2e-7)  # 128 x 128 x 16 points: 0.23600458
+
+
+@given(st.lists(st.floats(-1, 1), min_size=16, max_size=16))
+def test_corner_extrapolation_is_exact_for_bicubics(coefficients):
+    from radiosity.formfactors import gauss_legendre_01
+    from radiosity.visibility._pairs import _corner_extrapolation
+
+    c = np.array(coefficients).reshape(4, 4)
+    poly = lambda u, v: sum(c[a, b] * u**a * v**b for a in range(4) for b in range(4))  # noqa: E731
+    nodes = gauss_legendre_01(2)[0]
+    values = np.array([[poly(0.5 * cu + 0.5 * u, 0.5 * cv + 0.5 * v) for u in nodes for v in nodes]
+                       for cu, cv in ((0, 0), (1, 0), (0, 1), (1, 1))])
+    expected = [poly(0, 0), poly(1, 0), poly(1, 1), poly(0, 1)]
+    np.testing.assert_allclose(_corner_extrapolation(values[None], 2)[0], expected, atol=1e-9)
+
+
+@given(st.floats(0.05, 20), st.floats(0.05, 20), st.booleans())
+def test_root_cells_tile_the_patch_about_square(width, height, triangle):
+    from radiosity.visibility._constants import MAX_ROOT_CELLS
+
+    quad = np.array([[0, 0, 0], [width, 0, 0], [width, height, 0], [0, height, 0]], float)
+    if triangle:
+        quad[3] = quad[2]
+    vis = make_vis(np.array([quad, quad + [0, 0, 1]]))
+    pair, corner, size, share = vis._root_cells(np.array([0]))
+    np.testing.assert_allclose((size[:, 0] * size[:, 1]).sum(), 1.0)  # the cells tile [0, 1]^2
+    assert (corner >= 0).all() and (corner + size <= 1 + 1e-12).all()
+    if not triangle:  # about square: within 2, or as close as MAX_ROOT_CELLS cells along the length allow
+        sides = size * [width, height]
+        limit = max(2.0, max(width, height) / min(width, height) / MAX_ROOT_CELLS)
+        assert (sides.max(axis=1) <= limit * sides.min(axis=1) * (1 + 1e-9)).all()
+    assert (share > 0).all() and (share <= 1).all()
