@@ -33,7 +33,9 @@ FORMAT_VERSION = 1
 # that no cached matrix of the older rules is served. 2: the fine preset's exact shadows at fixed
 # receiver points (visibility._constants.SHADOW_CELLS_BELOW), after SHADOW_ORDER_EXTRA. 3: exact
 # shadows outside the cells on adaptively refined receiver squares (Visibility.adaptive_hidden).
-FILL_VERSION = 3
+# 4: those squares start about square on elongated patches, and at view_factors' tolerances
+# check their corners for kinks; shadow cells out of points retry, then fall back (2026-12-04).
+FILL_VERSION = 4
 ENV_SIZE = "RADIOSITY_CACHE_SIZE"
 DEFAULT_LIMIT = 2 << 30  # 2 GiB: a few hundred Cornell-box-sized matrices, a handful of big ones
 
