@@ -245,6 +245,21 @@ def _polygons(geometry) -> list:
     return out
 
 
+def _chains(geometry) -> list:
+    """The rings of any shapely geometry's polygons and its line strings (contact outlines and cuts)."""
+    import shapely
+
+    out = []
+    for part in shapely.get_parts(geometry):
+        if isinstance(part, shapely.Polygon):
+            out.extend([part.exterior, *part.interiors])
+        elif isinstance(part, shapely.LineString):
+            out.append(part)
+        elif isinstance(part, (shapely.MultiPolygon, shapely.MultiLineString, shapely.GeometryCollection)):
+            out.extend(_chains(part))
+    return out
+
+
 def _snap(points: np.ndarray, tol: float) -> np.ndarray:
     """Merge 2-D points closer than ``tol`` to the first of their cluster (few points)."""
     out = points.copy()
@@ -346,8 +361,6 @@ def _regions_of(receiver: _Part, parts: list[_Part], part_points: np.ndarray, pa
     and ``cover_parts`` (default: ``parts``) any that holds every part able to cover a footprint
     on it (:class:`_Candidates`), in their original order: the result does not depend on the others.
     """
-    import shapely
-
     tol = CONTACT_REL * scale
     exact = COPLANAR_REL * scale
     dist = (part_points - receiver.origin) @ receiver.normal
@@ -390,15 +403,49 @@ def _regions_of(receiver: _Part, parts: list[_Part], part_points: np.ndarray, pa
             starts = np.flatnonzero(both)
             segments[other.obj].extend(np.stack([xy[starts], xy[(starts + 1) % len(xy)]], axis=1))
     for obj, segs in segments.items():
-        foot = _footprint(segs, tol)
-        if foot is None:
-            continue
-        region = shape.intersection(foot)
-        if region.area <= SLIVER_AREA_REL * shape.area:
-            continue
-        covered = _is_covered(region, receiver, parts if cover_parts is None else cover_parts, obj, tol)
-        regions.append((region, covered, "footprint", obj))
+        regions.extend(_footprint_regions(segs, shape, receiver, parts if cover_parts is None else cover_parts, obj,
+                                          tol))
     return regions
+
+
+def _footprint_regions(segments: list[np.ndarray], shape, receiver: _Part, parts: list[_Part], obj: int,
+                       tol: float) -> list[tuple[object, bool, str, int]]:
+    """Contact regions of one object's edges lying in the receiver's plane (2-D segments).
+
+    Edges that close into loops enclose a footprint (a bottomless block). Edges that do not (a
+    partition standing on the floor, a cabinet open at the back against two walls) still cut the
+    receiver along their lines (kind ``"line"``): light jumps across a partition's foot, and a
+    patch straddling it averaged both sides (a floor patch's factor to the wall beside it 3.6e-4
+    off). Where such edges and the receiver's boundary enclose a part that the object covers (the
+    cabinet's corner of the floor), that part is a footprint too.
+    """
+    import shapely
+    from shapely.ops import polygonize
+
+    out = []
+    minimum = SLIVER_AREA_REL * shape.area
+    foot = _footprint(segments, tol)
+    if foot is not None:
+        region = shape.intersection(foot)
+        if region.area > minimum:
+            out.append((region, _is_covered(region, receiver, parts, obj, tol), "footprint", obj))
+    edges = [shapely.LineString(e) for e in segments if np.linalg.norm(e[1] - e[0]) > tol]
+    rim = None if foot is None else foot.boundary.buffer(tol)
+    # an edge along the receiver's own boundary (a wall's foot on the floor's rim) cuts nothing
+    inside = shape.buffer(-tol)
+    loose = [e for e in edges if (rim is None or not rim.contains(e)) and e.intersection(inside).length > tol]
+    if not loose:
+        return out
+    lines = shapely.unary_union(loose)
+    out.append((lines, False, "line", obj))
+    cells = [c for c in polygonize(shapely.unary_union([shape.exterior, lines]))
+             if c.area > minimum and shape.contains(c.representative_point())]
+    if len(cells) > 1:
+        for cell in cells:
+            if (foot is None or cell.intersection(foot).area <= minimum) and _is_covered(cell, receiver, parts, obj,
+                                                                                           tol):
+                out.append((cell, True, "footprint", obj))
+    return out
 
 
 def _is_covered(region, receiver: _Part, parts: list[_Part], obj: int, tol: float) -> bool:
@@ -628,27 +675,26 @@ def _extension_lines(regions, shape, tol: float) -> list:
     x0, y0, x1, y1 = shape.bounds
     reach = 2.0 * float(np.hypot(x1 - x0, y1 - y0)) + 1.0 * tol
     for region in regions:
-        for poly in _polygons(region):
-            for ring in [poly.exterior, *poly.interiors]:
-                xy = np.asarray(ring.coords)
-                for p, q in zip(xy[:-1], xy[1:]):
-                    d = q - p
-                    length = float(np.hypot(*d))
-                    if length <= tol:
-                        continue
-                    d = d / length
-                    normal = np.array([-d[1], d[0]])
-                    offset = float(normal @ p)
-                    if normal[0] < -1e-12 or (abs(normal[0]) <= 1e-12 and normal[1] < 0):
-                        normal, offset = -normal, -offset
-                    key = (float(normal[0]), float(normal[1]), offset)
-                    if any(abs(key[0] - k[0]) + abs(key[1] - k[1]) < 1e-9 and abs(key[2] - k[2]) <= tol
-                           for k in seen):
-                        continue
-                    seen.append(key)
-                    line = shapely.LineString([p - reach * d, q + reach * d])
-                    if line.intersects(shape):
-                        lines.append(line)
+        for chain in _chains(region):
+            xy = np.asarray(chain.coords)
+            for p, q in zip(xy[:-1], xy[1:]):
+                d = q - p
+                length = float(np.hypot(*d))
+                if length <= tol:
+                    continue
+                d = d / length
+                normal = np.array([-d[1], d[0]])
+                offset = float(normal @ p)
+                if normal[0] < -1e-12 or (abs(normal[0]) <= 1e-12 and normal[1] < 0):
+                    normal, offset = -normal, -offset
+                key = (float(normal[0]), float(normal[1]), offset)
+                if any(abs(key[0] - k[0]) + abs(key[1] - k[1]) < 1e-9 and abs(key[2] - k[2]) <= tol
+                       for k in seen):
+                    continue
+                seen.append(key)
+                line = shapely.LineString([p - reach * d, q + reach * d])
+                if line.intersects(shape):
+                    lines.append(line)
     return lines
 
 
@@ -663,19 +709,20 @@ def _emit_part(part: _Part, regions, emit, tol: float) -> None:
         emit(part.poly, part.face, False)
         return
     minimum = SLIVER_AREA_REL * shape.area
-    clipped = [(region.intersection(shape), hidden) for region, hidden, _, _ in regions]
+    cuts = [region for region, _, kind, _ in regions if kind == "line"]
+    clipped = [(region.intersection(shape), hidden) for region, hidden, kind, _ in regions if kind != "line"]
     clipped = [(r, h) for r, h in clipped if not r.is_empty and r.area > minimum]
     hidden_union = shapely.unary_union([r for r, h in clipped if h]) if any(h for _, h in clipped) else None
     if len(clipped) == 1 and abs(clipped[0][0].area - shape.area) <= minimum:
         emit(part.poly, part.face, clipped[0][1])  # the contact covers the whole part: no cut
         return
-    if not clipped:
+    if not clipped and not cuts:
         emit(part.poly, part.face, False)
         return
     # Cut along the full lines through the contact edges: in a convex face every cell of that
     # arrangement is convex and lies on one side of every outline, and most cells are
     # parallelograms or trapezoids, which subdivide into well-shaped patches.
-    lines = _extension_lines([r for r, _ in clipped], shape, tol)
+    lines = _extension_lines([r for r, _ in clipped] + cuts, shape, tol)
     if len(lines) <= MAX_EXTENSION_LINES:
         cells = [c for c in polygonize(shapely.unary_union([shape.exterior, *lines]))
                  if c.area > minimum and shape.contains(c.representative_point())]

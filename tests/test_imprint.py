@@ -288,3 +288,28 @@ def test_nonplanar_red_wall_cut_the_same_way_on_load_and_resubdivision():
     # 12 x 12 grid (0.5592 m / 0.05); the 12 cells on the fold (0.065 m long) cut in four
     assert len(a) == len(b) == 12 * 12 + 3 * 12
     np.testing.assert_allclose(np.sort(a.reshape(-1, 3), axis=0), np.sort(b.reshape(-1, 3), axis=0), atol=1e-12)
+
+
+def test_a_partition_standing_on_the_floor_cuts_it_along_its_foot():
+    """A two-sided panel on the floor: its foot closes no loop, but light jumps across it, and a
+    floor patch straddling it averaged both sides (a factor to the wall beside it 3.6e-4 off
+    in tests/helpers.office_scene). The floor is cut along the foot's line, nothing is hidden."""
+    panel = np.array([[1.0, 0, 0.5], [1.0, 0.8, 0.5], [1.0, 0.8, 1.5], [1.0, 0, 1.5]])
+    cut, _, _ = _imprint({"floor": [FLOOR], "panel": [panel, panel[::-1].copy()]})
+    assert not cut.piece_hidden.any() and cut.contacts == []
+    floor = [cut.vertices[p] for p, f in zip(cut.pieces, cut.piece_face) if f == 0]
+    assert len(floor) > 1
+    for piece in floor:  # every piece on one side of the foot's line
+        assert piece[:, 0].max() <= 1.0 + 1e-12 or piece[:, 0].min() >= 1.0 - 1e-12
+    assert sum(polygon_area(p) for p in floor) == pytest.approx(polygon_area(FLOOR), rel=1e-12)
+
+
+def test_a_box_open_at_the_back_in_a_corner_hides_its_footprint():
+    """A cabinet against two walls, modelled without its back, side and bottom faces: its edges
+    on the floor close a loop only with the floor's rim; its top covers that corner."""
+    x0, x1, z0, z1, h = 1.5, 2.0, 1.4, 2.0, 0.6
+    front = np.array([[x0, 0, z0], [x0, h, z0], [x1, h, z0], [x1, 0, z0]])  # facing -z
+    side = np.array([[x0, 0, z1], [x0, h, z1], [x0, h, z0], [x0, 0, z0]])  # facing -x
+    top = np.array([[x0, h, z0], [x0, h, z1], [x1, h, z1], [x1, h, z0]])  # facing +y
+    cut, _, _ = _imprint({"floor": [FLOOR], "cabinet": [front, side, top]})
+    assert _hidden_area(cut, 0) == pytest.approx((x1 - x0) * (z1 - z0), rel=1e-12)

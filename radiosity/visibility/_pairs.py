@@ -34,9 +34,9 @@ from .. import _tol
 from ..geometry import centroids_and_areas, polygon_normals
 from ..formfactors import gauss_legendre_01, patch_points, square_cell_corners, square_cell_points
 from . import _occluders
-from ._constants import (CELL_FALLBACK_ATOL, CELL_RETRY_POINTS, CHUNK_CELL_PAIRS, CHUNK_CLASSIFY, CHUNK_SHADOWS, KINK_BAND,
-                         MAX_ROOT_CELLS, MAX_UNION, MAX_UNION_CELLS, PLANE_REL, RAY_TFAR_SHORT,
-                         RECEIVE_SMALLER_WIDTHS, SATURATED_REL, WEIGHT_FLOOR_REL)
+from ._constants import (CELL_FALLBACK_ATOL, CELL_RETRY_POINTS, CHUNK_CELL_PAIRS, CHUNK_CLASSIFY, CHUNK_SHADOWS,
+                         KINK_BAND, MAX_ROOT_CELLS, MAX_UNION, MAX_UNION_CELLS, PLANE_REL,
+                         RAY_TFAR_SHORT, RECEIVE_SMALLER_WIDTHS, SATURATED_REL, WEIGHT_FLOOR_REL)
 from ._exact import hidden_factors, point_factors
 from ._occluders import FREE, FULL, MAYBE, build_occluders
 
