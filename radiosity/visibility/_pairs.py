@@ -433,10 +433,11 @@ class Visibility:
                         order: int = 2, max_depth: int = 6, penumbra_depth: int = 0) -> np.ndarray:
         """(m,) hidden part of partly occluded pairs, by receiver cells refined where the shadow varies.
 
-        The mean over receiver i of F(x -> part of j hidden from x), integrated on squares of
-        i's parameter domain: a square is split in four while its ``order**2``-point rule and its
-        four children's disagree by more than ``atol`` times i's area times the square's side
-        (1 for the whole patch), so the squares along a shadow's edge, the only ones that do
+        The mean over receiver i of F(x -> part of j hidden from x), integrated on cells of i's
+        parameter domain, about square ones to start with (:meth:`_root_cells`): a cell is split
+        in four while its ``order**2``-point rule and its four children's disagree by more than
+        ``atol`` times i's area times the cell's longest side over the patch's, so the cells
+        along a shadow's edge, the only ones that do
         not converge fast, sum to about ``atol`` (absolute, in form-factor units) per patch
         length of edge. A fixed rule smears an edge across the patch (a plate with a centred
         blocker erred by 9%; a closed room of boxes had rows 1.7e-3 from 1); the refinement
@@ -449,7 +450,10 @@ class Visibility:
         a penumbra narrower than the points' spacing passes between them unseen (an outer cap
         0.4 m above an inner prism's cap: 3% of the pair's factor). It costs points wherever an
         occluder may reach a square (the Cornell box's default fill took minutes, not seconds),
-        so the fill asks for it only at view_factors' tolerances.
+        so the fill asks for it only at view_factors' tolerances. To the same depth, a cell is
+        split where the hidden factor at one of its corners misses the polynomial through its
+        children's points (:func:`_corner_extrapolation`): a kink between the outermost points
+        and the cell's side.
         """
         i = np.ascontiguousarray(i, dtype=np.int64)
         j = np.ascontiguousarray(j, dtype=np.int64)
