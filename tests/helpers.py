@@ -468,11 +468,13 @@ def axis_box(lo, hi, *, inward: bool) -> list[np.ndarray]:
     return faces
 
 
-def office_scene(path):
+def office_scene(path, *, open_backs: bool = False):
     """A furnished office as thermal users model it, one patch per surface: a closed 4 x 3 x 2.5 m
     room (z up) with a door and a window in the south wall (y = 0, the wall cut around them), a
     desk and a cabinet standing on the floor (the cabinet in the north-east corner, touching
-    both walls), and a two-sided partition standing on the floor. Returns the loaded scene."""
+    both walls), and a two-sided partition standing on the floor. ``open_backs``: the desk
+    without its bottom face, the cabinet without the faces on the floor and against the walls.
+    Returns the loaded scene."""
     import warnings
 
     import radiosity
@@ -489,6 +491,10 @@ def office_scene(path):
                "desk": axis_box([1.5, 1.8, 0.0], [2.7, 2.4, 0.75], inward=False),
                "cabinet": axis_box([3.4, 2.5, 0.0], [4.0, 3.0, 1.8], inward=False),
                "partition": [partition, partition[::-1].copy()]}
+    if open_backs:
+        objects["desk"] = [q for q in objects["desk"] if q[:, 2].max() > 0]
+        objects["cabinet"] = [q for q in objects["cabinet"]
+                              if q[:, 2].max() > 0 and q[:, 0].min() < 4 and q[:, 1].min() < 3]
     with warnings.catch_warnings():  # no emitter: a note says so
         warnings.simplefilter("ignore", radiosity.RadiosityWarning)
         return radiosity.load_scene(write_obj(path, objects))
