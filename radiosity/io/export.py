@@ -358,8 +358,19 @@ def write_glb(solution, path: str | Path, *, exposure: float | None = None) -> N
     ``COLOR_0`` holds the radiance B/pi times ``exposure`` (the picture's, by default), clipped
     to [0, 1], as linear values (glTF's convention: viewers encode to sRGB on display). The
     material is unlit (``KHR_materials_unlit``). Each vertex also carries the float radiosity
-    (W/m^2) as the application attribute ``_RADIOSITY``. Written with trimesh's exporter.
+    (W/m^2) as the application attribute ``_RADIOSITY``. Written with trimesh's exporter, with
+    Ctrl-C and SIGTERM held back (:func:`radiosity._startup.signals_held`): trimesh imports its
+    optional modules under ``except BaseException`` and keeps the exception in their place, so a
+    signal landing in one of them became "TypeError: unsupported operand type(s) for |:
+    'ExceptionWrapper'" (exit 1) instead of the clean interruption (exit 130/143).
     """
+    from .._startup import signals_held
+
+    with signals_held():
+        _write_glb(solution, path, exposure)
+
+
+def _write_glb(solution, path: str | Path, exposure: float | None) -> None:
     import trimesh
 
     from ..viz import auto_exposure
