@@ -143,13 +143,6 @@ def stratified_points(quads: np.ndarray, samples: int, key: np.ndarray, salt: in
     return points, weights
 
 
-def _saturation(unocc: np.ndarray, hidden: np.ndarray) -> np.ndarray:
-    """(c,) int8 per row of points: bit 1 if all of them are lit, bit 2 if all are in full shadow."""
-    lit = (hidden <= SATURATED_REL * unocc).all(axis=1)
-    dark = (hidden >= (1 - SATURATED_REL) * unocc).all(axis=1)
-    return lit.astype(np.int8) | (dark.astype(np.int8) << 1)
-
-
 def _corner_extrapolation(values: np.ndarray, order: int) -> np.ndarray:
     """(c, 4) the polynomial through the four children's Gauss points of each cell (values
     (c, 4, order**2), children and points in :func:`square_cell_points`' order), at the cell's
@@ -588,7 +581,8 @@ class Visibility:
 
     def _cell_hidden(self, i, j, lists, pair, corner, size, order):
         """Integral of F(x -> hidden) over receiver cells (pair, corner, size), their areas, their
-        points' state (:func:`_saturation`) and the hidden factor at each of their points."""
+        points' state (bit 1 if all of them are lit, bit 2 if all are in full shadow) and the
+        hidden factor at each of their points."""
         out = np.zeros(len(pair))
         area = np.zeros(len(pair))
         state = np.zeros(len(pair), np.int8)
@@ -601,7 +595,9 @@ class Visibility:
             unocc, values[s:e] = self._points_hidden(pts, i[p], j[p], lists, p)
             out[s:e] = (values[s:e] * w).sum(axis=1)
             area[s:e] = w.sum(axis=1)
-            state[s:e] = _saturation(unocc, values[s:e])
+            lit = (values[s:e] <= SATURATED_REL * unocc).all(axis=1)
+            dark = (values[s:e] >= (1 - SATURATED_REL) * unocc).all(axis=1)
+            state[s:e] = lit.astype(np.int8) | (dark.astype(np.int8) << 1)
         return out, area, state, values
 
     def _corner_hidden(self, i, j, lists, pair, corner, size) -> np.ndarray:
