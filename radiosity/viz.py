@@ -398,7 +398,9 @@ def render(solution, path: str | Path | None = None, *, window_size=(800, 800), 
     mesh.point_data["rgb"] = tone_map(mesh.point_data["radiosity"] / np.pi, exposure)
     plotter = pv.Plotter(off_screen=off_screen, window_size=list(window_size))
     plotter.set_background("black")
-    plotter.add_mesh(mesh, scalars="rgb", rgb=True, lighting=False, show_scalar_bar=False)
+    # front faces only: a surface is one-sided, and a two-sided sheet (two coincident faces wound
+    # opposite ways, a partition) z-fought in stripes of its two sides' colours
+    plotter.add_mesh(mesh, scalars="rgb", rgb=True, lighting=False, show_scalar_bar=False, culling="back")
     apply_camera(plotter, choose_camera(solution, camera))
     if path is not None:
         plotter.screenshot(str(path))

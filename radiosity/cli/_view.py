@@ -143,7 +143,7 @@ def run(args) -> int:
     mesh.point_data["rgb"] = tone_map(radiance, exposure)  # the picture's tone map, when known
     plotter = pv.Plotter(off_screen=args.screenshot is not None)
     plotter.set_background("black")
-    plotter.add_mesh(mesh, scalars="rgb", rgb=True, lighting=False)
+    plotter.add_mesh(mesh, scalars="rgb", rgb=True, lighting=False, culling="back")
     apply_camera(plotter, result_camera(mesh, path, args.camera))
     if args.screenshot is not None:
         plotter.screenshot(str(args.screenshot))
