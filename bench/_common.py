@@ -79,21 +79,48 @@ def write_json(name: str, payload: dict, out: str | None = None) -> Path:
     return path
 
 
-def run_cases(script: str | Path, specs, *, cwd: Path, tail: int = 800) -> list[dict]:
+def run_cases(script: str | Path, specs, *, cwd: Path, tail: int = 800, timeout: float | None = None) -> list[dict]:
     """Each spec (a JSON-able dict) measured by ``script --case SPEC`` in a fresh process (so
     peak memory and compile state are its own): the JSON row its last line prints, or the spec
-    with ``failed`` (stderr's last line) when it exits non-zero. Prints each row as it comes."""
+    with ``failed`` (stderr's last line) when it exits non-zero. Prints each row as it comes.
+
+    With ``timeout`` (seconds) a case still running then is killed (its whole process group)
+    and recorded as the spec with ``failed: "not finished in ..."`` and ``timed_out: True``."""
+    import signal
     import subprocess
 
     rows = []
     for spec in specs:
-        done = subprocess.run([sys.executable, str(script), "--case", json.dumps(spec)], capture_output=True,
-                              text=True, cwd=cwd)
-        if done.returncode != 0:
-            rows.append({**spec, "failed": done.stderr.strip().splitlines()[-1:]})
-            print(spec, "failed:", done.stderr[-tail:], flush=True)
+        command = [sys.executable, str(script), "--case", json.dumps(spec)]
+        if timeout is None:
+            done = subprocess.run(command, capture_output=True, text=True, cwd=cwd, check=False)
+            stdout, stderr, returncode = done.stdout, done.stderr, done.returncode
+        else:
+            t0 = time.perf_counter()
+            proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=cwd,
+                                    start_new_session=True)
+            try:
+                stdout, stderr = proc.communicate(timeout=timeout)
+            except BaseException as stop:  # the timeout, or Ctrl-C here (the case's session would not see it)
+                try:
+                    os.killpg(proc.pid, signal.SIGKILL)  # the case's own session: it and anything it started
+                except ProcessLookupError:
+                    pass
+                if not isinstance(stop, subprocess.TimeoutExpired):
+                    proc.wait()
+                    raise
+                stdout, stderr = proc.communicate()
+                wall = time.perf_counter() - t0
+                rows.append({**spec, "failed": f"not finished in {timeout / 60:g} min", "timed_out": True,
+                             "wall_seconds": wall})
+                print(spec, f"killed: not finished in {timeout / 60:g} min", flush=True)
+                continue
+            returncode = proc.returncode
+        if returncode != 0:
+            rows.append({**spec, "failed": stderr.strip().splitlines()[-1:]})
+            print(spec, "failed:", stderr[-tail:], flush=True)
             continue
-        rows.append(json.loads(done.stdout.strip().splitlines()[-1]))
+        rows.append(json.loads(stdout.strip().splitlines()[-1]))
         print(json.dumps(rows[-1]), flush=True)
     return rows
 
