@@ -28,15 +28,21 @@ def _clip(src, n, dst, ax, ay, az, d):
         if abs(h) > hmax:
             hmax = abs(h)
     eps = 1e-13 * hmax
+    h_first = ax * src[0, 0] + ay * src[0, 1] + az * src[0, 2] + d
+    if abs(h_first) <= eps:
+        h_first = 0.0
+    h1 = h_first
     m = 0
     for k in range(n):
-        k2 = k + 1 if k + 1 < n else 0
-        h1 = ax * src[k, 0] + ay * src[k, 1] + az * src[k, 2] + d
-        h2 = ax * src[k2, 0] + ay * src[k2, 1] + az * src[k2, 2] + d
-        if abs(h1) <= eps:
-            h1 = 0.0
-        if abs(h2) <= eps:
-            h2 = 0.0
+        # each vertex's offset once: the next vertex's is this edge's far end
+        if k + 1 < n:
+            k2 = k + 1
+            h2 = ax * src[k2, 0] + ay * src[k2, 1] + az * src[k2, 2] + d
+            if abs(h2) <= eps:
+                h2 = 0.0
+        else:
+            k2 = 0
+            h2 = h_first
         if h1 >= 0.0:
             dst[m, 0] = src[k, 0]
             dst[m, 1] = src[k, 1]
@@ -48,7 +54,21 @@ def _clip(src, n, dst, ax, ay, az, d):
             dst[m, 1] = src[k, 1] + t * (src[k2, 1] - src[k, 1])
             dst[m, 2] = src[k, 2] + t * (src[k2, 2] - src[k, 2])
             m += 1
+        h1 = h2
     return m
+
+
+@njit(cache=True, inline="always")
+def _keeps_all(src, n, ax, ay, az, d):
+    """True if :func:`_clip` to a*v + d >= 0 would keep src[:n] as it is (no vertex below
+    its snapping margin)."""
+    hmin = np.inf
+    hmax = 0.0
+    for k in range(n):
+        h = ax * src[k, 0] + ay * src[k, 1] + az * src[k, 2] + d
+        hmin = min(hmin, h)
+        hmax = max(hmax, abs(h))
+    return hmin >= -1e-13 * hmax
 
 
 @njit(cache=True, inline="always")
@@ -77,12 +97,22 @@ def _edge_term(x, nx, p, q, t0=0.0, t1=1.0):
 @njit(cache=True)
 def _lambert(x, nx, poly, n, scratch):
     """Lambert's form factor from point x (normal nx) to polygon poly[:n], horizon-clipped."""
-    m = _clip(poly, n, scratch, nx[0], nx[1], nx[2], -(nx[0] * x[0] + nx[1] * x[1] + nx[2] * x[2]))
+    d = -(nx[0] * x[0] + nx[1] * x[1] + nx[2] * x[2])
+    if n >= 3 and _keeps_all(poly, n, nx[0], nx[1], nx[2], d):
+        # wholly above the horizon (up to _clip's snapping): the clip would copy it
+        return _polygon_term(x, nx, poly, n)
+    m = _clip(poly, n, scratch, nx[0], nx[1], nx[2], d)
     if m < 3:
         return 0.0
+    return _polygon_term(x, nx, scratch, m)
+
+
+@njit(cache=True, inline="always")
+def _polygon_term(x, nx, poly, n):
+    """Lambert's sum over the edges of poly[:n] (all above x's horizon), as a form factor."""
     total = 0.0
-    for k in range(m):
-        total += _edge_term(x, nx, scratch[k], scratch[k + 1 if k + 1 < m else 0])
+    for k in range(n):
+        total += _edge_term(x, nx, poly[k], poly[k + 1 if k + 1 < n else 0])
     return min(abs(total) / _TWO_PI, 1.0)
 
 
@@ -138,6 +168,22 @@ def _apex_normal(x, p, q):
             vx * vx + vy * vy + vz * vz)
 
 
+@njit(cache=True, inline="always")
+def _inside_slab(occ, ms, px, py, pz, off, dx):
+    """True if every vertex of occ[:ms] lies strictly between the planes p . v + off = 0 and
+    = dx, clear of both by more than :func:`_clip`'s snapping margin: clipping to the slab
+    between x and the source would keep the polygon as it is."""
+    lo = np.inf
+    hi = -np.inf
+    hmax = 0.0
+    for v in range(ms):
+        h = px * occ[v, 0] + py * occ[v, 1] + pz * occ[v, 2] + off
+        lo = min(lo, h)
+        hi = max(hi, h)
+        hmax = max(hmax, abs(h), abs(dx - h))
+    return lo > 1e-12 * hmax and hi < dx - 1e-12 * hmax
+
+
 @njit(cache=True)
 def _hidden_polygon(xr, src, ns, sn, occ, ms, on, tol, a, b, s1, s2):
     """Part of the source src[:ns] hidden from xr by the convex occluder occ[:ms], into s1.
@@ -156,8 +202,15 @@ def _hidden_polygon(xr, src, ns, sn, occ, ms, on, tol, a, b, s1, s2):
     if abs((xr[0] - ox) * on[0] + (xr[1] - oy) * on[1] + (xr[2] - oz) * on[2]) <= tol:
         return 0
     off = -(px * cx + py * cy + pz * cz)
-    n1 = _clip(occ, ms, a, px, py, pz, off)
-    n2 = _clip(a, n1, b, -px, -py, -pz, dx - off)
+    if _inside_slab(occ, ms, px, py, pz, off, dx):
+        for v in range(ms):  # the clipping below would copy it
+            b[v, 0] = occ[v, 0]
+            b[v, 1] = occ[v, 1]
+            b[v, 2] = occ[v, 2]
+        n2 = ms
+    else:
+        n1 = _clip(occ, ms, a, px, py, pz, off)
+        n2 = _clip(a, n1, b, -px, -py, -pz, dx - off)
     if n2 < 3 or _thinner_than(b, n2, tol):
         # An occluder that only touches the slab (a cap sharing the receiver's edge, clipped
         # at x's own depth) leaves a sliver of round-off width: its cone from x is flat, but
@@ -174,23 +227,32 @@ def _hidden_polygon(xr, src, ns, sn, occ, ms, on, tol, a, b, s1, s2):
         s1[k, 2] = src[k, 2]
     m = ns
     flat = True
+    # clip back and forth between s1 and s2, and copy once at the end if the result is in s2
+    cur, out = s1, s2
+    in_s1 = True
     for e in range(n2):
         e2 = e + 1 if e + 1 < n2 else 0
         mx, my, mz, uu, vv = _apex_normal(xr, b[e], b[e2])
-        if math.sqrt(mx * mx + my * my + mz * mz) <= 1e-14 * (uu + vv):
+        if mx * mx + my * my + mz * mz <= (1e-14 * (uu + vv)) ** 2:
             continue  # zero-length edge
         if mx * ix + my * iy + mz * iz < 0:
             mx, my, mz = -mx, -my, -mz
         flat = False
-        m = _clip(s1, m, s2, mx, my, mz, -(mx * xr[0] + my * xr[1] + mz * xr[2]))
-        for k in range(m):
-            s1[k, 0] = s2[k, 0]
-            s1[k, 1] = s2[k, 1]
-            s1[k, 2] = s2[k, 2]
+        off_e = -(mx * xr[0] + my * xr[1] + mz * xr[2])
+        if _keeps_all(cur, m, mx, my, mz, off_e):
+            continue  # the source's part so far lies inside this plane: the clip would copy it
+        m = _clip(cur, m, out, mx, my, mz, off_e)
+        cur, out = out, cur
+        in_s1 = not in_s1
         if m < 3:
             break
     if flat or m < 3:
         return 0
+    if not in_s1:
+        for k in range(m):
+            s1[k, 0] = s2[k, 0]
+            s1[k, 1] = s2[k, 1]
+            s1[k, 2] = s2[k, 2]
     return m
 
 
