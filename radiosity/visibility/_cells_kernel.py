@@ -36,7 +36,7 @@ from .._geometry_kernels import newell_z
 
 # numba's disk cache of this module's kernels holds the _exact_kernel helpers compiled in, and
 # is keyed on this file alone: a change there must touch this file too, or stale code runs
-# (last: _point_hidden's one-occluder path, session 16, 2026-12-04).
+# (last: _point_hidden's one-occluder path, _clip, _lambert and _hidden_polygon skip work; session 16).
 from ._exact_kernel import _classify_one, _hidden_polygon, _lambert, _point_hidden, union_scratch
 
 # Event lines one pair may cut its receiver by, and the cells they may make.

@@ -15,8 +15,8 @@ from numba import njit, prange
 
 # numba's disk cache of this module's kernels holds the _exact_kernel helpers compiled in (and
 # the _geometry_kernels ones they inline), and is keyed on this file alone: a change there must
-# touch this file too, or stale code runs (last: _point_hidden's one-occluder path,
-# session 16, 2026-12-04).
+# touch this file too, or stale code runs (last: _point_hidden's one-occluder path, _clip, _lambert,
+# _hidden_polygon skip work; session 16).
 from ._exact_kernel import _classify_one, _lambert, _mean_vertex, _next_occluder, _point_hidden, union_scratch
 
 
