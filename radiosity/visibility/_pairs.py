@@ -43,6 +43,10 @@ from ._occluders import FREE, FULL, MAYBE, build_occluders
 __all__ = ["Visibility", "occluder_mask", "FREE", "FULL", "MAYBE"]
 
 
+# Patches x hull facets below which occluder_mask tests every facet instead of the nearest ones.
+_ALL_FACETS_BELOW = 65_536
+
+
 def occluder_mask(quads: np.ndarray, scale: float) -> np.ndarray:
     """(n,) bool: patches that can block a segment between two other patches."""
     points = quads.reshape(-1, 3)
@@ -58,7 +62,11 @@ def occluder_mask(quads: np.ndarray, scale: float) -> np.ndarray:
     # missed this way only keeps a patch as an occluder, which costs time, never accuracy.
     from ._exact_kernel import on_facet_planes
 
-    candidates = _nearest_planes(quads, planes, scale)  # (n, c) facet indices
+    if len(quads) * len(planes) <= _ALL_FACETS_BELOW:
+        # few enough to test every facet: no tree to build (half the 8 x 8 open plates' setup)
+        candidates = np.broadcast_to(np.arange(len(planes)), (len(quads), len(planes)))
+    else:
+        candidates = _nearest_planes(quads, planes, scale)  # (n, c) facet indices
     # compiled: the (n, c, 4) distances and their gathers were half the open plates' setup
     return ~on_facet_planes(np.ascontiguousarray(quads, dtype=np.float64), np.ascontiguousarray(planes),
                             np.ascontiguousarray(candidates, dtype=np.int64), tol)
