@@ -46,6 +46,11 @@ __all__ = ["Hierarchy", "LinkOperator", "Links", "HierarchyStats"]
 # (geometry, tree, radiosity, P and R entries of a few levels): the memory estimate's rates.
 LINK_BYTES = 8 + 8 + 8 + 8 + 8 + 2 + 12 + 40
 ELEMENT_BYTES = 96 + 24 + 24 + 6 * 8 + 24 + 8 * 24
+# What a link (element or cluster) costs at the peak of a solve, with the refinement's batches
+# and the cluster estimates' node pairs: peak RSS above the RSS before the solve, per link, was
+# 230-750 bytes on bench_growth (645 on the 100k-face sphere, 4.9 M of its 5.0 M links cluster
+# links; 303 on the Cornell box at 129k leaves). The stored size (LINK_BYTES) was a ninth of it.
+LINK_PEAK_BYTES = 768
 CHUNK_LINKS = 100_000  # links evaluated at once (bounds the temporaries of the estimates)
 # Cluster links scale their isotropic estimate by the visibility of one representative pair of
 # patches (the middle patch of each node in tree order); their bound needs none, but without it
@@ -255,7 +260,7 @@ class Hierarchy:
         np.fill_diagonal(ok, False)
         a, b = np.nonzero(ok)
         _memory.check(f"the {len(a):,} initial links of {len(idx):,} input patches",
-                      int(len(a) * LINK_BYTES * 2), "cut the scene into fewer input faces")
+                      int(len(a) * LINK_PEAK_BYTES), "cut the scene into fewer input faces")
         return idx[a], idx[b]
 
     def error(self, links: Links) -> np.ndarray:
@@ -324,8 +329,8 @@ class Hierarchy:
         return links.take((links.factor > 0) & (links.visible > 0))
 
     def _check_memory(self, extra_links: int) -> None:
-        links = len(self.links) + extra_links
-        estimate = links * LINK_BYTES + 2 * len(self.el) * ELEMENT_BYTES
+        links = len(self.links) + len(self.cluster_r) + extra_links
+        estimate = links * LINK_PEAK_BYTES + 2 * len(self.el) * ELEMENT_BYTES
         _memory.check(f"a hierarchy of {links:,} links and {len(self.el):,} elements", int(estimate),
                       "raise link_tolerance or min_element_size (or use a coarser preset)")
 
