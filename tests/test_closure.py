@@ -254,7 +254,7 @@ def test_closed_room_of_cubes_rows_close_at_view_factors_defaults():
     scene = cube_room_scene(4, seed=2)
     F = radiosity.view_factors(scene, cache=False)
     rows = np.asarray(F.sum(axis=1)).ravel()
-    np.testing.assert_allclose(rows, 1.0, atol=4e-6)  # 1.2e-6 measured (1.6e-6 before the root cells and corner test)
+    np.testing.assert_allclose(rows, 1.0, atol=2e-6)  # 8.8e-7 measured (1.2e-6 with cells up to 8 occluders)
     area = scene.patch_area
     AF = F.multiply(area[:, None]).toarray()
     np.testing.assert_allclose(AF, AF.T, atol=1e-12 * area.max())
@@ -278,7 +278,7 @@ def test_a_small_patch_receives_from_a_much_larger_one():
 
 
 # ---------------------------------------------------------------- coarse thermal models close
-@pytest.mark.parametrize("open_backs, hidden, atol", [(False, 8, 3e-6), (True, 4, 1e-5)])
+@pytest.mark.parametrize("open_backs, hidden, atol", [(False, 8, 3e-6), (True, 4, 3e-6)])
 def test_furnished_office_rows_close_one_patch_a_surface(tmp_path, open_backs, hidden, atol):
     """Door and window in a wall, a desk and a cabinet on the floor, a two-sided partition, one
     patch per surface (tests/helpers.office_scene): the rows of the surfaces that see the room
@@ -293,7 +293,7 @@ def test_furnished_office_rows_close_one_patch_a_surface(tmp_path, open_backs, h
     active = np.asarray(vf.active)
     # under the desk and the cabinet, behind the cabinet (and, when modelled, its back and bottom)
     assert (~active).sum() == hidden
-    np.testing.assert_allclose(vf.row_sums[active], 1.0, atol=atol)  # 1.1e-6 and 3.3e-6 measured
+    np.testing.assert_allclose(vf.row_sums[active], 1.0, atol=atol)  # 1.1e-6 and 1.2e-6 measured (3.3e-6: cells to 8 occluders)
     area = vf.scene.patch_area
     AF = vf.F.multiply(area[:, None]).toarray()
     np.testing.assert_allclose(AF, AF.T, atol=1e-12 * area.max())

@@ -86,7 +86,10 @@ SHADOW_CELLS_BELOW = 1e-5
 # fall back when they run out of points): the furnished office's worst row 4.5e-6 -> 1.1e-6 (the
 # same with a bottomless desk and an open-backed cabinet 2.7e-5 -> 3.3e-6) in the same time; a
 # closed room of 20 floating cubes (126 patches) 250 s either way, 12-sided prisms 42 -> 47 s.
-MAX_CELL_OCCLUDERS = 8
+# 16 since session 16 (the cells 2-4x cheaper a point): the open-backed office 3.35e-6 -> 1.23e-6
+# (7.8 s against 9.1 s), the 4-cube room 1.15e-6 -> 8.8e-7 (5.1 s against 4.5 s), the 8-cube
+# room 2.78e-6 either way (17.1 s against 19.8 s), the 20-cube room 3.1e-6 in 284 s.
+MAX_CELL_OCCLUDERS = 16
 
 # Closed-object culling (``_closed``): winding numbers are taken this far (relative to the scene
 # size) in front of each patch, count as integers within WINDING_TOL, and an object is left

@@ -36,7 +36,8 @@ FORMAT_VERSION = 1
 # 4: those squares start about square on elongated patches, and at view_factors' tolerances
 # check their corners for kinks; shadow cells out of points retry, then fall back, and take
 # pairs behind up to 8 occluders (2026-12-04). 5: shadow cells integrate quadrilaterals with a
-# tensor Gauss rule, not as two triangles, far ones with a Bernstein-ellipse bound (session 16).
+# tensor Gauss rule, not as two triangles, far ones with a Bernstein-ellipse bound, and take
+# pairs behind up to 16 occluders (session 16).
 FILL_VERSION = 5
 ENV_SIZE = "RADIOSITY_CACHE_SIZE"
 DEFAULT_LIMIT = 2 << 30  # 2 GiB: a few hundred Cornell-box-sized matrices, a handful of big ones
