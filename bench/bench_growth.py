@@ -83,6 +83,7 @@ def run_case(spec: dict) -> dict:
         scene = radiosity.load_scene(radiosity.bundled_scene("cornell_box"))
         options = ({"method": "uniform", "max_patch_size": spec["max_patch_size"]} if spec["series"] == "uniform"
                    else {"method": "hierarchical", "min_element_size": spec["min_element_size"]})
+        options.update({k: spec[k] for k in ("link_tolerance",) if k in spec})  # a single case's own
     baseline = _rss_MB()  # interpreter, libraries, the scene
     t0 = time.perf_counter()
     solution = radiosity.solve(scene, preset=spec.get("preset", "draft"), cache=False, **options)
