@@ -288,7 +288,7 @@ def test_the_memory_estimate_counts_cluster_links_and_refuses_what_will_not_fit(
     sphere they were 4.9 M of 5.0 M links, and the estimate a ninth of the peak without them),
     and a budget below it is refused with the estimate, naming the links."""
     from radiosity import _memory
-    from radiosity.methods.hierarchical._hierarchy import LINK_PEAK_BYTES
+    from radiosity.methods.hierarchical._hierarchy import CLUSTER_LINK_PEAK_BYTES
 
     hier = build_hierarchy(furnace, Options.from_preset("draft", link_tolerance=1e-2, min_element_rel=1 / 10),
                            clusters=True)
@@ -297,7 +297,7 @@ def test_the_memory_estimate_counts_cluster_links_and_refuses_what_will_not_fit(
     monkeypatch.setattr(_memory, "check", lambda what, estimate, knob, **kw: (
         seen.append((len(hier.cluster_r), estimate)), check(what, estimate, knob, **kw))[1])
     hier.refine()
-    assert seen and all(estimate >= n_cluster * LINK_PEAK_BYTES for n_cluster, estimate in seen)
+    assert seen and all(estimate >= n_cluster * CLUSTER_LINK_PEAK_BYTES for n_cluster, estimate in seen)
     assert max(n for n, _ in seen) > 0
     monkeypatch.setattr(_memory, "check", check)
     monkeypatch.setenv(_memory.ENV_BUDGET, "200K")

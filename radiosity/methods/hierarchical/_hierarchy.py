@@ -46,11 +46,13 @@ __all__ = ["Hierarchy", "LinkOperator", "Links", "HierarchyStats"]
 # (geometry, tree, radiosity, P and R entries of a few levels): the memory estimate's rates.
 LINK_BYTES = 8 + 8 + 8 + 8 + 8 + 2 + 12 + 40
 ELEMENT_BYTES = 96 + 24 + 24 + 6 * 8 + 24 + 8 * 24
-# What a link (element or cluster) costs at the peak of a solve, with the refinement's batches
-# and the cluster estimates' node pairs: peak RSS above the RSS before the solve, per link, was
-# 230-750 bytes on bench_growth (645 on the 100k-face sphere, 4.9 M of its 5.0 M links cluster
-# links; 303 on the Cornell box at 129k leaves). The stored size (LINK_BYTES) was a ninth of it.
-LINK_PEAK_BYTES = 768
+# What a link costs at the peak of a solve, with the refinement's batches (and, for cluster
+# links, the estimates' node pairs): peak RSS above the RSS before the solve, per link, on
+# bench_growth from 0.5 M links on: 230-360 bytes where all links are element links (the
+# Cornell box, 23k-129k leaves), 360-645 where most are cluster links (the furnace spheres;
+# 645 at 100k faces, 4.9 M of its 5.0 M links). The stored size (LINK_BYTES) was a ninth of it.
+LINK_PEAK_BYTES = 400
+CLUSTER_LINK_PEAK_BYTES = 768
 CHUNK_LINKS = 100_000  # links evaluated at once (bounds the temporaries of the estimates)
 # Cluster links scale their isotropic estimate by the visibility of one representative pair of
 # patches (the middle patch of each node in tree order); their bound needs none, but without it
@@ -330,7 +332,8 @@ class Hierarchy:
 
     def _check_memory(self, extra_links: int) -> None:
         links = len(self.links) + len(self.cluster_r) + extra_links
-        estimate = links * LINK_PEAK_BYTES + 2 * len(self.el) * ELEMENT_BYTES
+        estimate = ((len(self.links) + extra_links) * LINK_PEAK_BYTES
+                    + len(self.cluster_r) * CLUSTER_LINK_PEAK_BYTES + 2 * len(self.el) * ELEMENT_BYTES)
         _memory.check(f"a hierarchy of {links:,} links and {len(self.el):,} elements", int(estimate),
                       "raise link_tolerance or min_element_size (or use a coarser preset)")
 
