@@ -160,7 +160,8 @@ def _first_hits_numpy(origins, directions, triangles, offset) -> tuple[np.ndarra
             q = np.cross(s, e1[None])
             v = np.einsum("rtc,rtc->rt", np.broadcast_to(d, q.shape), q) * inv
             t = np.einsum("rtc,tc->rt", q, e2) * inv
-        ok = (np.abs(det) > 0) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > offset)
+            # inside the errstate: a ray parallel to a triangle (det 0) makes u + v inf - inf
+            ok = (np.abs(det) > 0) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > offset)
         t = np.where(ok, t, np.inf)
         best = np.argmin(t, axis=1)
         found = np.isfinite(t[np.arange(len(t)), best])

@@ -138,6 +138,8 @@ _ROOM_OPEN_SHARE = 0.05
 # ... and is no room at all when this share escapes in no one direction: under the lamp of a
 # 50 m terrain 45% of the rays leave sideways, and the view "inside" looked straight down.
 _OPEN_ALL_ROUND_SHARE = 0.25
+# An axis other than y is taken as up when it is the shortest and under this share of y's extent.
+_VERTICAL_SHORTER = 0.9
 # Rays per viewpoint: 256, fewer on big scenes (at least 64) so a probe stays near 4e7
 # ray-triangle tests (about a second).
 _PROBE_RAYS = 256
@@ -187,10 +189,24 @@ def parse_camera(text: str, focal_default=None) -> Camera:
     return Camera(position, focal, _up_for(np.subtract(focal, position)), angle, "--camera")
 
 
-def _up_for(direction) -> tuple[float, float, float]:
+def _up_for(direction, vertical: int = 1) -> tuple[float, float, float]:
+    """The ``vertical`` axis as the camera's up, unless it looks (nearly) along it."""
     d = np.asarray(direction, float)
     d = d / max(np.linalg.norm(d), 1e-300)
-    return (0.0, 0.0, 1.0) if abs(d[1]) > 0.98 else (0.0, 1.0, 0.0)
+    up = np.zeros(3)
+    up[vertical] = 1.0
+    if abs(d[vertical]) > 0.98:
+        up = np.zeros(3)
+        up[2 if vertical != 2 else 1] = 1.0
+    return tuple(float(c) for c in up)
+
+
+def _vertical_axis(size: np.ndarray) -> int:
+    """The scene's up axis: y (OBJ's convention) unless another axis is clearly the shortest
+    (under 90% of y's extent and the smallest): rooms are wider than tall, so a room modelled
+    z-up (a thermal model, a CAD export) stands on its floor too."""
+    k = int(np.argmin(size))
+    return k if k != 1 and size[k] < _VERTICAL_SHORTER * size[1] else 1
 
 
 def _fibonacci_directions(n: int) -> np.ndarray:
@@ -234,10 +250,11 @@ def auto_camera(triangles: np.ndarray) -> Camera | None:
     Rays from 27 points of the scene's bounding box (a 3 x 3 x 3 grid at 25/50/75%) find the one
     that sees the most front faces. If that share is at least 60%, the scene is a room. A room
     letting more than 5% of the rays escape (over all the points inside it) is open (the Cornell
-    box's front): the camera looks in through the opening, from outside it, level (y up), with a
+    box's front): the camera looks in through the opening, from outside it, level, with a
     40 degree lens framing the room. A closed room is looked at from inside, near the middle of
     one wall at 60% of the height, across its longest horizontal extent, with a 70 degree lens;
-    a wall spot inside an object is skipped.
+    a wall spot inside an object is skipped. Up is y, OBJ's convention, unless another axis is
+    clearly the shortest (a room modelled z-up, as thermal models and CAD exports often are).
     """
     pts = triangles.reshape(-1, 3)
     lo, hi = pts.min(axis=0), pts.max(axis=0)
@@ -266,11 +283,12 @@ def auto_camera(triangles: np.ndarray) -> Camera | None:
     # Seen from all the points inside, more than 5% of the rays leave the room: it is open, and
     # the mean escaping direction points out through the opening (unless it leaks all round).
     if len(out) > _ROOM_OPEN_SHARE * n_rays * len(escaping) and np.linalg.norm(out.mean(axis=0)) > 0.3:
-        return _through_opening(out.mean(axis=0), lo, hi)
+        return _through_opening(out.mean(axis=0), lo, hi, _vertical_axis(size))
     if len(out) > _OPEN_ALL_ROUND_SHARE * n_rays * len(escaping):
         return None  # light leaves all round (a terrain under a lamp): no room to stand in
-    return _inside(lo, hi, triangles, offset, directions) or Camera(
-        tuple(point), tuple(center), _up_for(center - point), _VIEW_ANGLE_INSIDE, "inside the room")
+    vertical = _vertical_axis(size)
+    return _inside(lo, hi, triangles, offset, directions, vertical) or Camera(
+        tuple(point), tuple(center), _up_for(center - point, vertical), _VIEW_ANGLE_INSIDE, "inside the room")
 
 
 def _axis(vector) -> np.ndarray:
@@ -281,7 +299,7 @@ def _axis(vector) -> np.ndarray:
     return out
 
 
-def _through_opening(out: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> Camera:
+def _through_opening(out: np.ndarray, lo: np.ndarray, hi: np.ndarray, vertical: int = 1) -> Camera:
     """Look into an open room from outside its opening (``out``: the way light escapes)."""
     out = _axis(out)  # rooms are built along the axes; a level camera reads best
     k = int(np.argmax(np.abs(out)))
@@ -290,26 +308,58 @@ def _through_opening(out: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> Camera:
     across = max(half[j] for j in range(3) if j != k) * 1.05
     distance = across / np.tan(np.radians(_VIEW_ANGLE_OPENING / 2))
     position = center + out * (half[k] + distance)
-    return Camera(tuple(position), tuple(center), _up_for(out), _VIEW_ANGLE_OPENING,
+    return Camera(tuple(position), tuple(center), _up_for(out, vertical), _VIEW_ANGLE_OPENING,
                   "outside the room's open side, looking in")
 
 
-def _inside(lo, hi, triangles, offset, directions) -> Camera | None:
-    """Near the middle of a wall, looking across the room's longest horizontal extent."""
+def _inside(lo, hi, triangles, offset, directions, vertical: int = 1) -> Camera | None:
+    """Near the middle of a wall, looking across the room's longest horizontal extent; a spot
+    whose view is blocked close by (a partition before it) gives way to the next wall's."""
     size = hi - lo
     center = 0.5 * (lo + hi)
-    for k in sorted((0, 2), key=lambda j: -size[j]):
+    v = vertical
+    first = None
+    for k in sorted((j for j in range(3) if j != v), key=lambda j: -size[j]):
         for sign in (1.0, -1.0):
             position = center.copy()
-            position[1] = lo[1] + 0.6 * size[1]
+            position[v] = lo[v] + 0.6 * size[v]
             position[k] = center[k] - sign * 0.42 * size[k]
             front, _, _, _ = _probe(position, directions, triangles, offset)
-            if front >= 0.9:
-                focal = center.copy()
-                focal[1] = lo[1] + 0.4 * size[1]
-                return Camera(tuple(position), tuple(focal), (0.0, 1.0, 0.0), _VIEW_ANGLE_INSIDE,
-                              "inside the room, near a wall")
-    return None
+            if front < 0.9:
+                continue
+            focal = center.copy()
+            focal[v] = lo[v] + 0.4 * size[v]
+            camera = Camera(tuple(position), tuple(focal), _up_for(focal - position, v), _VIEW_ANGLE_INSIDE,
+                            "inside the room, near a wall")
+            if _clear_view(position, focal, size, triangles, offset):
+                return camera
+            first = first or camera
+    return first
+
+
+def _clear_view(position, focal, size, triangles, offset) -> bool:
+    """Whether most of 9 rays towards the focal point and around it (a quarter of the room
+    either side) travel at least half-way to it before they hit a face."""
+    from ._lightpaths import _first_hits
+
+    targets = np.array([focal + a * 0.25 * size * e for a in (-1.0, 0.0, 1.0) for e in (_unit(0), _unit(1), _unit(2))
+                        if a != 0.0] + [focal])
+    directions = targets - position
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    origins = np.repeat(position[None], len(targets), axis=0)
+    hit, _ = _first_hits(origins, directions, triangles, offset)
+    tri = triangles[np.maximum(hit, 0)]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.einsum("nc,nc->n", normal, tri[:, 0] - origins) / np.einsum("nc,nc->n", normal, directions)
+    t = np.where(hit >= 0, t, np.inf)
+    return float(np.mean(t >= 0.5 * np.linalg.norm(focal - position))) >= 2 / 3
+
+
+def _unit(k: int) -> np.ndarray:
+    e = np.zeros(3)
+    e[k] = 1.0
+    return e
 
 
 def choose_camera(solution, camera: Camera | str | None = None) -> Camera | None:

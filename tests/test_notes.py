@@ -320,6 +320,22 @@ def test_camera_hint_still_wins_and_cornell_box_is_seen_through_its_open_front(t
     assert np.allclose(auto.position, (0.278, 0.274, -0.8), atol=0.05)  # about the published camera
 
 
+def test_a_room_modelled_z_up_is_seen_upright_past_its_partition(tmp_path):
+    """The furnished office (tests/helpers.office_scene) is modelled z-up, as thermal models
+    often are: the camera stands z-up (it took y before, and looked at the room on its side),
+    and the wall spot behind the partition, 0.7 m before it, gives way to one with a clear view."""
+    from helpers import office_scene
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RadiosityWarning)
+        scene = office_scene(tmp_path / "office.obj")
+    cam = auto_camera(_triangles(scene.patch_quads[~scene.patch_hidden])[0])
+    assert cam.how.startswith("inside the room") and cam.up == (0.0, 0.0, 1.0)
+    assert 0 < cam.position[2] < 2.5 and cam.position[0] > 1.0  # east of the partition (x = 1)
+    room = load(write_room(tmp_path, "y_up"))  # y-up rooms keep y
+    assert auto_camera(_triangles(room.patch_quads)[0]).up == (0.0, 1.0, 0.0)
+
+
 def test_closed_room_is_seen_from_inside_and_a_box_from_outside(tmp_path):
     room = load(write_room(tmp_path, "ok"))
     cam = auto_camera(_triangles(room.patch_quads)[0])
