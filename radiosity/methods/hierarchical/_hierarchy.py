@@ -47,11 +47,13 @@ __all__ = ["Hierarchy", "LinkOperator", "Links", "HierarchyStats"]
 LINK_BYTES = 8 + 8 + 8 + 8 + 8 + 2 + 12 + 40
 ELEMENT_BYTES = 96 + 24 + 24 + 6 * 8 + 24 + 8 * 24
 # What a link costs at the peak of a solve, with the refinement's batches (and, for cluster
-# links, the estimates' node pairs): peak RSS above the RSS before the solve, per link, on
-# bench_growth from 0.5 M links on: 230-360 bytes where all links are element links (the
-# Cornell box, 23k-129k leaves), 360-645 where most are cluster links (the furnace spheres;
-# 645 at 100k faces, 4.9 M of its 5.0 M links). The stored size (LINK_BYTES) was a ninth of it.
-LINK_PEAK_BYTES = 400
+# links, the estimates' node pairs), per link the check counts (the kept links and the new
+# candidates): on the Cornell box at fine, 3.5 mm, link_tolerance 5e-4, 2.32 GB above the RSS
+# before the solve for at least 23.2 M links counted, about 100 bytes a link; element links
+# take twice that. Per final link, bench_growth measured 230-360 bytes on the Cornell box and
+# 360-645 on the cluster-heavy furnace spheres (645 at 100k faces, 4.9 M of its 5.0 M links
+# cluster links), so cluster links take 768. The stored size (LINK_BYTES) is 94.
+LINK_PEAK_BYTES = 200
 CLUSTER_LINK_PEAK_BYTES = 768
 CHUNK_LINKS = 100_000  # links evaluated at once (bounds the temporaries of the estimates)
 # Cluster links scale their isotropic estimate by the visibility of one representative pair of
