@@ -52,9 +52,10 @@ ELEMENT_BYTES = 96 + 24 + 24 + 6 * 8 + 24 + 8 * 24
 # before the solve for at least 23.2 M links counted, about 100 bytes a link; element links
 # take twice that. Per final link, bench_growth measured 230-360 bytes on the Cornell box and
 # 360-645 on the cluster-heavy furnace spheres (645 at 100k faces, 4.9 M of its 5.0 M links
-# cluster links), so cluster links take 768. The stored size (LINK_BYTES) is 94.
+# cluster links) and 970 in the room of 1,000 floating cubes (7.7 GB for 7.95 M links, 5.13 M
+# of them cluster links), so cluster links take 1,536. The stored size (LINK_BYTES) is 94.
 LINK_PEAK_BYTES = 200
-CLUSTER_LINK_PEAK_BYTES = 768
+CLUSTER_LINK_PEAK_BYTES = 1536
 CHUNK_LINKS = 100_000  # links evaluated at once (bounds the temporaries of the estimates)
 # Cluster links scale their isotropic estimate by the visibility of one representative pair of
 # patches (the middle patch of each node in tree order); their bound needs none, but without it
