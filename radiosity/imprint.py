@@ -420,7 +420,6 @@ def _footprint_regions(segments: list[np.ndarray], shape, receiver: _Part, parts
     cabinet's corner of the floor), that part is a footprint too.
     """
     import shapely
-    from shapely.ops import polygonize
 
     out = []
     minimum = SLIVER_AREA_REL * shape.area
@@ -438,14 +437,23 @@ def _footprint_regions(segments: list[np.ndarray], shape, receiver: _Part, parts
         return out
     lines = shapely.unary_union(loose)
     out.append((lines, False, "line", obj))
-    cells = [c for c in polygonize(shapely.unary_union([shape.exterior, lines]))
-             if c.area > minimum and shape.contains(c.representative_point())]
+    cells = _arrangement_cells(shape, [lines], minimum)
     if len(cells) > 1:
         for cell in cells:
             if (foot is None or cell.intersection(foot).area <= minimum) and _is_covered(cell, receiver, parts, obj,
                                                                                            tol):
                 out.append((cell, True, "footprint", obj))
     return out
+
+
+def _arrangement_cells(shape, lines: list, minimum: float) -> list:
+    """The cells into which ``lines`` (shapely lines) cut the polygon ``shape``, larger than
+    ``minimum`` (slivers of round-off dropped)."""
+    import shapely
+    from shapely.ops import polygonize
+
+    return [c for c in polygonize(shapely.unary_union([shape.exterior, *lines]))
+            if c.area > minimum and shape.contains(c.representative_point())]
 
 
 def _is_covered(region, receiver: _Part, parts: list[_Part], obj: int, tol: float) -> bool:
@@ -700,7 +708,6 @@ def _extension_lines(regions, shape, tol: float) -> list:
 
 def _emit_part(part: _Part, regions, emit, tol: float) -> None:
     import shapely
-    from shapely.ops import polygonize
 
     shape = _polygon(part.to_2d(part.poly))
     if shape.geom_type != "Polygon":
@@ -724,8 +731,7 @@ def _emit_part(part: _Part, regions, emit, tol: float) -> None:
     # parallelograms or trapezoids, which subdivide into well-shaped patches.
     lines = _extension_lines([r for r, _ in clipped] + cuts, shape, tol)
     if len(lines) <= MAX_EXTENSION_LINES:
-        cells = [c for c in polygonize(shapely.unary_union([shape.exterior, *lines]))
-                 if c.area > minimum and shape.contains(c.representative_point())]
+        cells = _arrangement_cells(shape, lines, minimum)
     else:  # too many outlines: cut along the outlines only
         cells = []
         taken = shapely.Polygon()

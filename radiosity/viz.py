@@ -193,12 +193,8 @@ def _up_for(direction, vertical: int = 1) -> tuple[float, float, float]:
     """The ``vertical`` axis as the camera's up, unless it looks (nearly) along it."""
     d = np.asarray(direction, float)
     d = d / max(np.linalg.norm(d), 1e-300)
-    up = np.zeros(3)
-    up[vertical] = 1.0
-    if abs(d[vertical]) > 0.98:
-        up = np.zeros(3)
-        up[2 if vertical != 2 else 1] = 1.0
-    return tuple(float(c) for c in up)
+    axis = vertical if abs(d[vertical]) <= 0.98 else (2 if vertical != 2 else 1)
+    return tuple(float(c) for c in np.eye(3)[axis])
 
 
 def _vertical_axis(size: np.ndarray) -> int:
@@ -282,11 +278,11 @@ def auto_camera(triangles: np.ndarray) -> Camera | None:
     out = np.concatenate(escaping)
     # Seen from all the points inside, more than 5% of the rays leave the room: it is open, and
     # the mean escaping direction points out through the opening (unless it leaks all round).
+    vertical = _vertical_axis(size)
     if len(out) > _ROOM_OPEN_SHARE * n_rays * len(escaping) and np.linalg.norm(out.mean(axis=0)) > 0.3:
-        return _through_opening(out.mean(axis=0), lo, hi, _vertical_axis(size))
+        return _through_opening(out.mean(axis=0), lo, hi, vertical)
     if len(out) > _OPEN_ALL_ROUND_SHARE * n_rays * len(escaping):
         return None  # light leaves all round (a terrain under a lamp): no room to stand in
-    vertical = _vertical_axis(size)
     return _inside(lo, hi, triangles, offset, directions, vertical) or Camera(
         tuple(point), tuple(center), _up_for(center - point, vertical), _VIEW_ANGLE_INSIDE, "inside the room")
 
@@ -342,8 +338,8 @@ def _clear_view(position, focal, size, triangles, offset) -> bool:
     either side) travel at least half-way to it before they hit a face."""
     from ._lightpaths import _first_hits
 
-    targets = np.array([focal + a * 0.25 * size * e for a in (-1.0, 0.0, 1.0) for e in (_unit(0), _unit(1), _unit(2))
-                        if a != 0.0] + [focal])
+    step = 0.25 * np.diag(size)  # a quarter of the room along each axis
+    targets = focal + np.concatenate([-step, step, np.zeros((1, 3))])
     directions = targets - position
     directions /= np.linalg.norm(directions, axis=1)[:, None]
     origins = np.repeat(position[None], len(targets), axis=0)
@@ -355,11 +351,6 @@ def _clear_view(position, focal, size, triangles, offset) -> bool:
     t = np.where(hit >= 0, t, np.inf)
     return float(np.mean(t >= 0.5 * np.linalg.norm(focal - position))) >= 2 / 3
 
-
-def _unit(k: int) -> np.ndarray:
-    e = np.zeros(3)
-    e[k] = 1.0
-    return e
 
 
 def choose_camera(solution, camera: Camera | str | None = None) -> Camera | None:
