@@ -73,8 +73,9 @@ def to_polydata(solution):
     """pyvista.PolyData of the solved patches with per-face and per-vertex radiosity.
 
     Cell data: ``radiosity`` (n, 3) W/m^2, ``object`` (n,) index into the field data
-    ``object_names``; point data: ``radiosity`` (area-weighted over the patches of the same
-    object meeting at the vertex).
+    ``object_names``, ``hidden`` (n,) 1 for patches covered by a contact (never seen; threshold
+    them away to look at the surfaces); point data: ``radiosity`` (area-weighted over the
+    patches of the same object meeting at the vertex).
     """
     pv = pyvista()
 
@@ -83,22 +84,26 @@ def to_polydata(solution):
     mesh = pv.PolyData(vertices, cells)
     mesh.cell_data["radiosity"] = solution.radiosity
     mesh.cell_data["object"] = solution.scene.patch_object
+    mesh.cell_data["hidden"] = solution.scene.patch_hidden.astype(np.uint8)
     mesh.point_data["radiosity"] = vertex_b
     mesh.field_data["object_names"] = np.array(solution.scene.objects, dtype=str)
     return mesh
 
 
 def _render_mesh(solution):
-    """Triangles for the picture: each patch outline fanned from its first corner.
+    """Triangles for the picture: each visible patch outline fanned from its first corner.
 
     Outlines carry the T-junction vertices of their neighbours (``Solution.vertex_mesh``), so
     they have collinear points, which VTK's polygon triangulation mishandles (stray pixels);
-    a fan from a corner gives only proper or zero-area triangles.
+    a fan from a corner gives only proper or zero-area triangles. Hidden patches (covered by a
+    contact) are left out: never seen, they z-fought where what covers them is coplanar (two
+    overlapping table tops of a generated room drew black streaks across the visible one).
     """
     pv = pyvista()
 
     vertices, faces, vertex_b = solution.vertex_mesh
-    tris = np.concatenate([np.column_stack([np.full(len(f) - 2, f[0]), f[1:-1], f[2:]]) for f in faces])
+    shown = [f for f, hidden in zip(faces, solution.scene.patch_hidden) if not hidden] or faces
+    tris = np.concatenate([np.column_stack([np.full(len(f) - 2, f[0]), f[1:-1], f[2:]]) for f in shown])
     a, b, c = (vertices[tris[:, k]] for k in range(3))
     twice_area = np.linalg.norm(np.cross(b - a, c - a), axis=1)
     tris = tris[twice_area > 1e-12 * solution.scene.scale**2]  # collinear corners: no triangle

@@ -60,3 +60,23 @@ def test_white_balance_changes_the_picture_only(tmp_path, capsys):
     assert a["objects"] == b["objects"] and a["exposure"] == b["exposure"]
     assert "white_balance" not in a and b["white_balance"]["applies_to"] == "picture.png only"
     assert (runs["none"] / "solution.ply").read_bytes() == (runs["light"] / "solution.ply").read_bytes()
+
+
+def test_the_picture_leaves_out_hidden_patches(tmp_path):
+    """Two overlapping coplanar table tops facing the same way: imprint hides the overlap on
+    one of them, and the picture draws only the other (drawn both, they z-fought in streaks)."""
+    from radiosity.viz import _render_mesh, to_polydata
+
+    obj = tmp_path / "tops.obj"
+    obj.write_text("mtllib tops.mtl\n"
+                   "o top_a\nusemtl wood\nv 0 0 0\nv 0 0 1\nv 1 0 1\nv 1 0 0\nf 1 2 3 4\n"
+                   "o top_b\nusemtl wood\nv 0.5 0 0.5\nv 0.5 0 1.5\nv 1.5 0 1.5\nv 1.5 0 0.5\nf 5 6 7 8\n"
+                   "o lamp\nusemtl lamp\nv 0 2 0\nv 1 2 0\nv 1 2 1\nv 0 2 1\nf 9 10 11 12\n")
+    (tmp_path / "tops.mtl").write_text("newmtl wood\nKd 0.5 0.4 0.3\nnewmtl lamp\nKd 0 0 0\nKe 5 5 5\n")
+    scene = radiosity.load_scene(obj)
+    hidden = scene.patch_hidden
+    assert np.isclose(scene.patch_area[hidden].sum(), 0.25)  # the overlap, on one top only
+    solution = radiosity.Solution(scene=scene, radiosity=np.ones((scene.n_patches, 3)), F=None)
+    mesh = _render_mesh(solution)
+    assert np.isclose(mesh.area, scene.patch_area[~hidden].sum())
+    assert to_polydata(solution).cell_data["hidden"].sum() == hidden.sum()
