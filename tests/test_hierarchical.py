@@ -303,3 +303,40 @@ def test_the_memory_estimate_counts_cluster_links_and_refuses_what_will_not_fit(
     monkeypatch.setenv(_memory.ENV_BUDGET, "200K")
     with pytest.raises(radiosity.MemoryBudgetError, match="links"):
         solve_h(furnace, link_tolerance=1e-2, min_element_rel=1 / 10)
+
+
+def test_a_cluster_shares_a_link_by_how_its_patches_face_the_source():
+    """A cube's faces as one cluster, lit from +x: the +x face takes the whole share (its area
+    mean over the cube is 1, so the link keeps its power), the faces turned away none; the
+    patch facing a point most is the one the cluster's visibility is taken from."""
+    from radiosity.methods.hierarchical._clusters import ClusterTree
+
+    quads = np.array(axis_box([0, 0, 0], [1, 1, 1], inward=False) + axis_box([5, 0, 0], [6, 1, 1], inward=False))
+    normals = np.cross(quads[:, 1] - quads[:, 0], quads[:, 3] - quads[:, 0])
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    areas = np.ones(12)
+    tree = ClusterTree(np.arange(12), quads, normals, areas, np.full((12, 3), 0.5))
+    cube = next(k for k in tree.internal if set(tree.order[tree.lo[k]:tree.hi[k]]) == set(range(6)))
+    other = next(k for k in tree.internal if set(tree.order[tree.lo[k]:tree.hi[k]]) == set(range(6, 12)))
+    _, patch, share = tree.oriented_shares(np.array([cube]), np.array([other]))
+    plus_x = int(np.argmax(normals[:6, 0]))
+    assert np.isclose((share * areas[patch]).sum() / 6.0, 1.0)
+    assert share[patch == plus_x] == pytest.approx(6.0, rel=1e-2)  # nearly all of it: the others graze
+    assert (share[normals[patch, 0] < -0.5] == 0).all()
+    assert tree.facing_patch(np.array([cube]), np.array([[5.5, 0.5, 0.5]]))[0] == plus_x
+
+
+def test_clustered_furnace_room_of_100_cubes():
+    """The clustering case through heavy occlusion: a closed room holding 100 floating cubes
+    (606 faces, so the solve clusters), every face E = 1, rho = 0.5, B = 2 on every leaf.
+    Measured at draft, 1e-2, min size 1/10: worst leaf -0.7% / +0.6%, mean -0.1%. Before
+    2026-12-05 -3.6% / +4.9%: cluster links took the visibility of two patches turned away
+    from each other and spread their estimate evenly over the cube faces they reached, and a
+    wall's hundreds of links to small cubes each met eps while their sum did not."""
+    from helpers import cube_room_scene
+
+    solution = solve_h(cube_room_scene(100), link_tolerance=1e-2, min_element_rel=1 / 10)
+    assert solution.summary()["hierarchy"]["cluster_links"] > 0
+    error = solution.radiosity / 2.0 - 1.0
+    assert np.abs(error).max() < 0.015
+    assert abs(error.mean()) < 3e-3

@@ -11,8 +11,9 @@ start with n^2 links. A link (r gathers from s) between nodes, one of them a clu
   both can face, :meth:`ClusterTree.orientation_bound`): ``err = max_c(rho_r,c B_s,c) * that``;
 - estimated isotropically when kept: the power r gets is ``B_s P_r(u) P_s(-u) / (pi d^2)``,
   with ``P(u) = sum A_i max(0, n_i . u)`` the projected area of a node's faces toward the
-  other's centre ``u`` (faces are one-sided), spread evenly over r's area (the push); no
-  visibility (the bound holds for any occlusion, so the error stays within it).
+  other's centre ``u`` (faces are one-sided), shared out over r's patches by how each faces s
+  (:meth:`ClusterTree.oriented_shares`; evenly where r is about flat), times the visibility of
+  the pair of patches that face each other most (:meth:`ClusterTree.facing_patch`).
 
 A link over ``eps`` is split at its larger cluster (both children); a cluster's link to itself
 always splits (into its children's links to themselves and to each other). A pair of two
@@ -87,6 +88,7 @@ class ClusterTree:
         self.normals, self.areas = np.asarray(normals, float), np.asarray(areas, float)
         order = np.asarray(patches, np.int64).copy()
         centroids = quads.mean(axis=1)
+        self.centroids = centroids
         lo, hi, child, level = [0], [len(order)], [[-1, -1]], [0]
         frontier = np.array([0]) if len(order) > 1 else np.zeros(0, np.int64)
         depth = 0
@@ -280,6 +282,58 @@ class ClusterTree:
             power = self._projected(rr, u) * self._projected(ss, -u) / (np.pi * np.where(ok, d2, 1.0))
             out[part] = np.where(ok, np.minimum(power / np.maximum(self.area[rr], 1e-300), 1.0), 0.0)
         return out
+
+    def facing_patch(self, nodes: np.ndarray, toward: np.ndarray) -> np.ndarray:
+        """(m,) the patch of each node that faces the point ``toward`` (m, 3) most: the largest
+        ``A_i n_i . u``, ``u`` from the node's centre (its middle patch if none faces it).
+
+        A cluster link's visibility comes from one pair of patches. The middle patches in tree
+        order were often faces turned away from each other, which a cube's own plane culls to
+        "free": links of a cube face to a source behind other cubes counted 1 for a true 0.1,
+        and the 100-cube furnace room's brightest leaf was 4.9% over.
+        """
+        seg, pos = _ranges(self.lo[nodes], self.hi[nodes])
+        p = self.order[pos]
+        score = self.areas[p] * np.einsum("tc,tc->t", self.normals[p], toward[seg] - self.centre[nodes][seg])
+        best = np.full(len(nodes), -np.inf)
+        np.maximum.at(best, seg, score)
+        pick = self.order[(self.lo[nodes] + self.hi[nodes]) // 2]
+        hit = np.flatnonzero((score >= best[seg]) & (best[seg] > 0))
+        pick[seg[hit]] = p[hit]
+        return pick
+
+    def oriented_shares(self, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """How cluster links (r gathers from s) share their estimate out over r's patches.
+
+        Patch i of r weighs ``sum_b P_b(-u) max(0, n_i . u_ib) / d_ib^2`` over the nodes b
+        ``ESTIMATE_DEPTH`` levels below s (``u``: from r's centre to b's; ``u_ib``, ``d_ib``:
+        from i's centroid), scaled so that the area mean over r is 1 (the estimate keeps its
+        power; all ones where no patch faces s). Spread evenly, a cube face turned to a wall
+        2 cm away got a share of the far room it cannot see (Sillion 1995's oriented clusters).
+
+        Returns (link, patch, share): one row per link and patch of its r.
+        """
+        link, b = np.arange(len(r)), np.asarray(s)
+        for _ in range(ESTIMATE_DEPTH):
+            link, _, b = _halve(self, link, r[link], b, first=False)
+        u = self.centre[b] - self.centre[r[link]]
+        d = np.linalg.norm(u, axis=1)
+        power = self._projected(b, -u / np.where(d > 0, d, 1.0)[:, None])
+        members = self.hi[r] - self.lo[r]
+        start = np.cumsum(members) - members
+        seg, pos = _ranges(self.lo[r[link]], self.hi[r[link]])  # (node b, patch of r) rows
+        p = self.order[pos]
+        w = self.centre[b[seg]] - self.centroids[p]
+        d2 = np.einsum("tc,tc->t", w, w)
+        ok = d2 > 0
+        cos = np.maximum(np.einsum("tc,tc->t", self.normals[p], w), 0.0) / np.sqrt(np.where(ok, d2, 1.0))
+        weight = np.bincount(start[link[seg]] + pos - self.lo[r[link[seg]]],
+                             np.where(ok, power[seg] * cos / np.where(ok, d2, 1.0), 0.0), minlength=int(members.sum()))
+        row_link = np.repeat(np.arange(len(r)), members)
+        patch = self.order[_ranges(self.lo[r], self.hi[r])[1]]
+        mean = np.bincount(row_link, weight * self.areas[patch], minlength=len(r)) / np.maximum(self.area[r], 1e-300)
+        share = np.where(mean[row_link] > 0, weight / np.where(mean > 0, mean, 1.0)[row_link], 1.0)
+        return row_link, patch, share
 
     # ------------------------------------------------------------------ push-pull
     def membership(self, n_roots: int) -> sp.csr_matrix:
