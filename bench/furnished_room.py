@@ -114,20 +114,50 @@ def stool(obj: ObjWriter, k: int, centre, sides: int) -> None:
     obj.add_mesh(f"stool{k}_leg", "wood", box((cx - 0.02, 0, cz - 0.02), (cx + 0.02, 0.42, cz + 0.02)))
 
 
+def _free_spot(rng, lo, hi, size, taken: list, gap: float, tries: int = 200):
+    """A random corner in [lo, hi) for an axis-aligned footprint of ``size`` that keeps ``gap``
+    from every footprint in ``taken`` ((corner, size) pairs), or None. Furniture that
+    interpenetrates is not a furnished room: overlapping table tops are coplanar faces covering
+    each other, which imprint hides on one of them."""
+    for _ in range(tries):
+        corner = rng.uniform(lo, hi)
+        if all(((corner + size + gap <= c) | (c + s + gap <= corner)).any() for c, s in taken):
+            return corner
+    return None
+
+
 def populate(obj: ObjWriter, n_tables: int, subdivisions: int, rng) -> None:
+    """The room with up to ``n_tables`` tables (as many as fit without overlapping), half as
+    many stools clear of the tables' legs and of each other, two shelves and spheres."""
     room_shell(obj)
     x, _, z = ROOM
+    shelves = [(np.array([0.5 + 3.0 * k, z - 0.35]), np.array([1.5, 0.34])) for k in range(2)]
+    tables, legs = [], list(shelves)
     for k in range(n_tables):
-        table(obj, k, (rng.uniform(0.3, x - 1.6), rng.uniform(0.3, z - 1.1)), rng)
+        corner = _free_spot(rng, (0.3, 0.3), (x - 1.6, z - 1.1), np.array([1.2, 0.7]), tables + shelves, 0.05)
+        if corner is None:
+            break  # the room is full
+        table(obj, len(tables), corner, rng)
+        tables.append((corner, np.array([1.2, 0.7])))
+        legs += [(corner + d, np.array([0.05, 0.05])) for d in ((0.05, 0.05), (1.1, 0.05), (0.05, 0.6), (1.1, 0.6))]
+    seats: list = []
     for k in range(max(1, n_tables // 2)):
-        stool(obj, k, (rng.uniform(0.4, x - 0.4), rng.uniform(0.4, z - 0.4)), sides=int(rng.integers(6, 24)))
-    for k in range(2):  # shelves against the back wall, touching it
-        sx = 0.5 + 3.0 * k
-        obj.add_mesh(f"shelf{k}", "wood", box((sx, 0, z - 0.35), (sx + 1.5, 1.8, z - 0.01)))
-    for k in range(max(1, n_tables // 3)):  # spheres floating at head height
+        corner = _free_spot(rng, (0.2, 0.2), (x - 0.6, z - 0.6), np.array([0.4, 0.4]), seats + legs, 0.02)
+        if corner is None:
+            break
+        stool(obj, len(seats), tuple(corner + 0.2), sides=int(rng.integers(6, 24)))
+        seats.append((corner, np.array([0.4, 0.4])))
+    for k, (corner, size) in enumerate(shelves):  # against the back wall, touching it
+        obj.add_mesh(f"shelf{k}", "wood", box((corner[0], 0, corner[1]), (corner[0] + size[0], 1.8, corner[1] + size[1])))
+    balls: list = []
+    for k in range(max(1, n_tables // 3)):  # spheres floating at head height, clear of each other
+        spot = _free_spot(rng, (0.35, 1.25, 0.35), (x - 0.65, 2.05, z - 0.65), np.full(3, 0.3), balls, 0.02)
+        if spot is None:
+            break
         sphere = trimesh.creation.icosphere(subdivisions=subdivisions, radius=0.15)
-        sphere.apply_translation([rng.uniform(0.5, x - 0.5), rng.uniform(1.4, 2.2), rng.uniform(0.5, z - 0.5)])
-        obj.add_mesh(f"sphere{k}", ("red", "green")[k % 2], sphere)
+        sphere.apply_translation(spot + 0.15)
+        obj.add_mesh(f"sphere{len(balls)}", ("red", "green")[len(balls) % 2], sphere)
+        balls.append((spot, np.full(3, 0.3)))
 
 
 def generate(path: Path, faces: int, furnace: bool = False, seed: int = 0) -> int:
@@ -152,6 +182,7 @@ def main() -> None:
     parser.add_argument("--furnace", action="store_true", help="every surface Kd 0.5, Ke 1: B = E/(1-rho) exactly")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
+    args.output.parent.mkdir(parents=True, exist_ok=True)
     n = generate(args.output, args.faces, args.furnace, args.seed)
     print(f"wrote {args.output} ({n:,} faces)")
 
