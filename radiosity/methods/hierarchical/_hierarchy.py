@@ -82,6 +82,7 @@ ORIENT_CONE = 0.2
 # sum, not each (Hierarchy._over). 0.5 cost the bundled box's default solve 33% more links for
 # nothing; at 0.25 it has the same links within 0.2%, and the 100-cube room the same accuracy.
 SMALL_SOURCE = 0.25
+SHARE_ROWS = 500_000  # (link, patch) rows of the oriented shares computed at once
 # Receiver points per direction of the exact shadows of partly visible links at the minimum size
 # (see Hierarchy._settle).
 SETTLE_ORDER = 3
@@ -492,12 +493,20 @@ class Hierarchy:
         column = np.where(tree.patch >= 0, tree.patch, ne + tree.column)
         n = ne + len(tree.internal)
         oriented = (tree.patch[self.cluster_r] < 0) & (tree.cone[self.cluster_r] > ORIENT_CONE)
-        link, patch, share = tree.oriented_shares(self.cluster_r[oriented], self.cluster_s[oriented])
         even = ~oriented
-        rows = np.concatenate([column[self.cluster_r[even]], patch])  # roots are elements 0..n_roots-1
-        cols = np.concatenate([column[self.cluster_s[even]], column[self.cluster_s[oriented][link]]])
-        values = np.concatenate([self.cluster_factor[even], self.cluster_factor[oriented][link] * share])
-        links = sp.csr_matrix((values, (rows, cols)), shape=(n, n))
+        rows, cols = [column[self.cluster_r[even]]], [column[self.cluster_s[even]]]
+        values = [self.cluster_factor[even]]
+        r, s, factor = self.cluster_r[oriented], self.cluster_s[oriented], self.cluster_factor[oriented]
+        # in chunks of about SHARE_ROWS (link, patch) rows: the shares' temporaries take a few
+        # hundred bytes a row, and the 1,000-cube room has tens of millions of rows
+        size = (tree.hi - tree.lo)[r]
+        bounds = np.searchsorted(np.cumsum(size), np.arange(SHARE_ROWS, int(size.sum()), SHARE_ROWS))
+        for part in np.split(np.arange(len(r)), np.unique(bounds)):
+            link, patch, share = tree.oriented_shares(r[part], s[part])
+            rows.append(patch)  # roots are elements 0..n_roots-1: a patch's row is its element's
+            cols.append(column[s[part]][link])
+            values.append(factor[part][link] * share)
+        links = sp.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
         gather = sp.block_diag([gather, sp.csr_matrix((len(tree.internal), len(tree.internal)))], format="csr") + links
         return sp.hstack([push, push_c], format="csr"), gather, sp.vstack([pull, pull_c], format="csr")
 
