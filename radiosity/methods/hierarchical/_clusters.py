@@ -292,14 +292,18 @@ class ClusterTree:
         "free": links of a cube face to a source behind other cubes counted 1 for a true 0.1,
         and the 100-cube furnace room's brightest leaf was 4.9% over.
         """
-        seg, pos = _ranges(self.lo[nodes], self.hi[nodes])
-        p = self.order[pos]
-        score = self.areas[p] * np.einsum("tc,tc->t", self.normals[p], toward[seg] - self.centre[nodes][seg])
-        best = np.full(len(nodes), -np.inf)
-        np.maximum.at(best, seg, score)
         pick = self.order[(self.lo[nodes] + self.hi[nodes]) // 2]
-        hit = np.flatnonzero((score >= best[seg]) & (best[seg] > 0))
-        pick[seg[hit]] = p[hit]
+        sizes = self.hi[nodes] - self.lo[nodes]
+        bounds = np.searchsorted(np.cumsum(sizes), np.arange(ESTIMATE_CHUNK, int(sizes.sum()), ESTIMATE_CHUNK))
+        for part in np.split(np.arange(len(nodes)), np.unique(bounds)):  # ~100 bytes a member
+            seg, pos = _ranges(self.lo[nodes[part]], self.hi[nodes[part]])
+            p = self.order[pos]
+            score = self.areas[p] * np.einsum("tc,tc->t", self.normals[p],
+                                              toward[part][seg] - self.centre[nodes[part]][seg])
+            best = np.full(len(part), -np.inf)
+            np.maximum.at(best, seg, score)
+            hit = np.flatnonzero((score >= best[seg]) & (best[seg] > 0))
+            pick[part[seg[hit]]] = p[hit]
         return pick
 
     def oriented_shares(self, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
