@@ -137,23 +137,24 @@ def _unite(table: np.ndarray, grid: float) -> tuple[np.ndarray, np.ndarray, np.n
         return shapely.union_all(table, axis=1), snapped, lost
     except GEOSException:
         pass
-    if len(table) > 1:
-        # one bad row fails the whole call: halve, so the good rows stay vectorised (row by row,
-        # a furnished room's fill spent 68% of its shadow time in this loop's calls)
-        half = len(table) // 2
-        parts = [_unite(table[:half], grid), _unite(table[half:], grid)]
-        return tuple(np.concatenate([p[k] for p in parts]) for k in range(3))
-    out = np.empty(len(table), dtype=object)  # one row, whose union failed
-    polys = table[0][table[0] != None]  # noqa: E711
-    for repair in (shapely.make_valid, lambda p: shapely.buffer(p, 0.0)):
+    out = np.empty(len(table), dtype=object)
+    for g, row in enumerate(table):
         try:
-            out[0] = shapely.union_all(repair(polys), grid_size=grid)
-            return out, ~lost, lost
-        except GEOSException:
+            out[g] = shapely.union_all(row)
             continue
-    lost[0] = True
-    out[0] = polys[int(np.argmax(shapely.area(polys)))] if len(polys) else shapely.Polygon()
-    return out, snapped, lost
+        except GEOSException:
+            snapped[g] = True
+        polys = row[row != None]  # noqa: E711
+        for repair in (shapely.make_valid, lambda p: shapely.buffer(p, 0.0)):
+            try:
+                out[g] = shapely.union_all(repair(polys), grid_size=grid)
+                break
+            except GEOSException:
+                continue
+        else:
+            lost[g] = True
+            out[g] = polys[int(np.argmax(shapely.area(polys)))] if len(polys) else shapely.Polygon()
+    return out, snapped & ~lost, lost
 
 
 def hidden_factors(x: np.ndarray, nx: np.ndarray, group: np.ndarray, source: np.ndarray,
