@@ -500,7 +500,7 @@ class Hierarchy:
         values = [self.cluster_factor[even]]
         r, s, factor = self.cluster_r[oriented], self.cluster_s[oriented], self.cluster_factor[oriented]
         # in chunks of about SHARE_ROWS (link, patch) rows: the shares' temporaries take a few
-        # hundred bytes a row, and the 1,000-cube room has tens of millions of rows
+        # hundred bytes a row (one per source node below s); the 300-cube room has 1.24 M rows
         size = (tree.hi - tree.lo)[r]
         bounds = np.searchsorted(np.cumsum(size), np.arange(SHARE_ROWS, int(size.sum()), SHARE_ROWS))
         for part in np.split(np.arange(len(r)), np.unique(bounds)):
