@@ -133,7 +133,7 @@ def populate(obj: ObjWriter, n_tables: int, subdivisions: int, rng) -> None:
     x, _, z = ROOM
     shelves = [(np.array([0.5 + 3.0 * k, z - 0.35]), np.array([1.5, 0.34])) for k in range(2)]
     tables, legs = [], list(shelves)
-    for k in range(n_tables):
+    for _ in range(n_tables):
         corner = _free_spot(rng, (0.3, 0.3), (x - 1.6, z - 1.1), np.array([1.2, 0.7]), tables + shelves, 0.05)
         if corner is None:
             break  # the room is full
@@ -141,7 +141,7 @@ def populate(obj: ObjWriter, n_tables: int, subdivisions: int, rng) -> None:
         tables.append((corner, np.array([1.2, 0.7])))
         legs += [(corner + d, np.array([0.05, 0.05])) for d in ((0.05, 0.05), (1.1, 0.05), (0.05, 0.6), (1.1, 0.6))]
     seats: list = []
-    for k in range(max(1, n_tables // 2)):
+    for _ in range(max(1, n_tables // 2)):
         corner = _free_spot(rng, (0.2, 0.2), (x - 0.6, z - 0.6), np.array([0.4, 0.4]), seats + legs, 0.02)
         if corner is None:
             break
@@ -150,7 +150,7 @@ def populate(obj: ObjWriter, n_tables: int, subdivisions: int, rng) -> None:
     for k, (corner, size) in enumerate(shelves):  # against the back wall, touching it
         obj.add_mesh(f"shelf{k}", "wood", box((corner[0], 0, corner[1]), (corner[0] + size[0], 1.8, corner[1] + size[1])))
     balls: list = []
-    for k in range(max(1, n_tables // 3)):  # spheres floating at head height, clear of each other
+    for _ in range(max(1, n_tables // 3)):  # spheres floating at head height, clear of each other
         spot = _free_spot(rng, (0.35, 1.25, 0.35), (x - 0.65, 2.05, z - 0.65), np.full(3, 0.3), balls, 0.02)
         if spot is None:
             break

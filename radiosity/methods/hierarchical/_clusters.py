@@ -43,6 +43,12 @@ def _ranges(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return seg, np.repeat(lo, sizes) + np.arange(int(sizes.sum())) - starts[seg]
 
 
+def chunks(sizes: np.ndarray, limit: int) -> list[np.ndarray]:
+    """Consecutive index groups of ``sizes`` (rows each item makes) of about ``limit`` rows."""
+    bounds = np.searchsorted(np.cumsum(sizes), np.arange(limit, int(np.sum(sizes)), limit))
+    return np.split(np.arange(len(sizes)), np.unique(bounds))
+
+
 def _angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """(m,) angle between unit vectors, radians."""
     return np.arccos(np.clip(np.einsum("mc,mc->m", a, b), -1.0, 1.0))
@@ -270,8 +276,7 @@ class ClusterTree:
         """(m,) one centre-to-centre isotropic estimate per node pair."""
         out = np.zeros(len(r))
         sizes = (self.hi[r] - self.lo[r]) + (self.hi[s] - self.lo[s])
-        bounds = np.searchsorted(np.cumsum(sizes), np.arange(ESTIMATE_CHUNK, int(sizes.sum()), ESTIMATE_CHUNK))
-        for part in np.split(np.arange(len(r)), np.unique(bounds)):
+        for part in chunks(sizes, ESTIMATE_CHUNK):
             if not len(part):
                 continue
             rr, ss = r[part], s[part]
@@ -294,8 +299,7 @@ class ClusterTree:
         """
         pick = self.order[(self.lo[nodes] + self.hi[nodes]) // 2]
         sizes = self.hi[nodes] - self.lo[nodes]
-        bounds = np.searchsorted(np.cumsum(sizes), np.arange(ESTIMATE_CHUNK, int(sizes.sum()), ESTIMATE_CHUNK))
-        for part in np.split(np.arange(len(nodes)), np.unique(bounds)):  # ~100 bytes a member
+        for part in chunks(sizes, ESTIMATE_CHUNK):  # ~100 bytes a member
             seg, pos = _ranges(self.lo[nodes[part]], self.hi[nodes[part]])
             p = self.order[pos]
             score = self.areas[p] * np.einsum("tc,tc->t", self.normals[p],

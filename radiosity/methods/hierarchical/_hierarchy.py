@@ -36,7 +36,7 @@ import scipy.sparse.linalg as spla
 
 from ... import _memory
 from ...visibility import Visibility
-from ._clusters import CLUSTER_MIN_ROOTS, ClusterTree
+from ._clusters import CLUSTER_MIN_ROOTS, ClusterTree, chunks
 from ._elements import Elements
 from ._links import ElementVisibility, adaptive_factors, link_factors
 
@@ -501,9 +501,7 @@ class Hierarchy:
         r, s, factor = self.cluster_r[oriented], self.cluster_s[oriented], self.cluster_factor[oriented]
         # in chunks of about SHARE_ROWS (link, patch) rows: the shares' temporaries take a few
         # hundred bytes a row (one per source node below s); the 300-cube room has 1.24 M rows
-        size = (tree.hi - tree.lo)[r]
-        bounds = np.searchsorted(np.cumsum(size), np.arange(SHARE_ROWS, int(size.sum()), SHARE_ROWS))
-        for part in np.split(np.arange(len(r)), np.unique(bounds)):
+        for part in chunks((tree.hi - tree.lo)[r], SHARE_ROWS):
             link, patch, share = tree.oriented_shares(r[part], s[part])
             rows.append(patch)  # roots are elements 0..n_roots-1: a patch's row is its element's
             cols.append(column[s[part]][link])
@@ -534,9 +532,10 @@ def _past_budget(r: np.ndarray, err: np.ndarray, budget: float) -> np.ndarray:
     if not len(r):
         return np.zeros(0, bool)
     order = np.lexsort((err, r))
-    receiver, total = r[order], np.cumsum(err[order])
+    receiver, sorted_err = r[order], err[order]
+    total = np.cumsum(sorted_err)
     first = np.flatnonzero(np.r_[True, receiver[1:] != receiver[:-1]])
-    before = np.repeat(total[first] - err[order][first], np.diff(np.r_[first, len(r)]))
+    before = np.repeat(total[first] - sorted_err[first], np.diff(np.r_[first, len(r)]))
     out = np.zeros(len(r), bool)
     out[order] = total - before > budget
     return out
