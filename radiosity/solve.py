@@ -6,6 +6,7 @@ import hashlib
 import time
 import warnings
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
@@ -20,6 +21,10 @@ from .solution import Solution
 from .methods.uniform.system import (SolverReport, bound_rows, energy_balance, gain_note, gained_power,
                                      gaining_patches, solve_system)
 from .visibility import Visibility
+
+if TYPE_CHECKING:  # the return types of the view-factor entry points, imported where used
+    from .factors import ViewFactors
+    from .methods.uniform.shards import ShardedViewFactors
 
 __all__ = ["solve", "view_factors", "compute_view_factors", "write_view_factors", "prepare"]
 

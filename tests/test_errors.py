@@ -6,7 +6,6 @@ Scene validation (non-planar, degenerate, reflectance, emission, units), the mem
 
 from __future__ import annotations
 
-import shutil
 import warnings
 from pathlib import Path
 

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import radiosity
-from radiosity.imprint import imprint_faces, subdivide_imprinted
+from radiosity.imprint import imprint_faces
 from radiosity.io.obj import read_obj
 
 CORPUS = sorted((Path(__file__).parent / "data" / "corpus").glob("*.obj"))
