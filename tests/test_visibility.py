@@ -248,6 +248,36 @@ def test_runs_of_pairs_classified_whole_match_pairs_one_by_one():
         assert {FREE, FULL, MAYBE} <= set(status.tolist())
 
 
+def test_culling_behind_either_plane_drops_exactly_the_occluders_behind():
+    """``cull_behind`` (the hierarchy's elements) leaves out of the classification every occluder
+    with no vertex in front of the receiver's plane or of the source's, and nothing else: a
+    box's faces touching one of its faces are no longer possible occluders of that face's pairs.
+    Runs of pairs classified as a whole still match the pairs one by one."""
+    quads, groups = boxes_scene()
+    vis = make_vis(quads, groups)
+    vis.closed = False  # compare with the classification alone
+    i, j = all_pairs(len(quads))
+    ref_status, ref_rows, ref_occ = vis.classify(i, j)
+    vis.cull_behind = True
+    status, rows, occ = vis.classify(i, j)
+
+    polys = vis.occluders.polys[ref_occ]
+    tol = 1e-9 * vis.scale
+
+    def in_front(patch):
+        return np.einsum("tkc,tc->tk", polys - quads[patch[ref_rows], 0][:, None, :], vis.normals[patch[ref_rows]])
+
+    keep = (in_front(i).max(axis=1) > tol) & (in_front(j).max(axis=1) > tol)
+    assert 0 < (~keep).sum() and keep.sum() > 0  # some touch, some do not
+    assert sorted(zip(rows.tolist(), occ.tolist())) == sorted(zip(ref_rows[keep].tolist(), ref_occ[keep].tolist()))
+    left = np.bincount(ref_rows[keep], minlength=len(i))
+    expected = np.where(ref_status == FULL, FULL, np.where(left > 0, MAYBE, FREE))
+    np.testing.assert_array_equal(status, expected)
+    perm = np.random.default_rng(4).permutation(len(i))
+    shuffled, _, _ = vis._classify_pairs(quads, i[perm], quads, j[perm], vis.normals)
+    np.testing.assert_array_equal(shuffled, status[perm])
+
+
 def test_occluder_mask_kernel_matches_numpy_reference():
     """The compiled on-facet test of occluder_mask gives the numpy form's mask."""
     from scipy.spatial import ConvexHull

@@ -983,15 +983,30 @@ def _hull_planes(vi, vj, planes, tol):
     return n
 
 
+
+@njit(cache=True, inline="always")
+def _behind(polys, kk, point, n, tol):
+    """Occluder kk has no vertex more than tol in front of the plane through ``point`` with unit
+    normal ``n``: no segment from that plane's front side (a one-sided patch sees only there)
+    can cross it but at the plane itself, a set of measure zero."""
+    for k in range(polys.shape[1]):
+        h = ((polys[kk, k, 0] - point[0]) * n[0] + (polys[kk, k, 1] - point[1]) * n[1]
+             + (polys[kk, k, 2] - point[2]) * n[2])
+        if h > tol:
+            return False
+    return True
+
 @njit(cache=True, inline="always")
 def _classify_pair(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, node_hi, node_left, node_right,
                    node_start, node_count, order, pad, tol, out_occ, stack, lo, hi, si, sj, outside, valid, gi, gj,
-                   planes):
+                   planes, nij, behind):
     """Walk the BVH for one pair; write its MAYBE occluders to out_occ (as many as fit).
 
     Returns (status, number of MAYBE occluders); a FULL pair stops at its first full occluder.
     After HULL_AFTER occluders the walk also leaves out boxes beyond a face of the pair's hull
-    (``planes``: scratch); the same pair always walks the same way.
+    (``planes``: scratch); the same pair always walks the same way. With ``behind`` >= 0 an
+    occluder that lies behind the plane of either patch (unit normals ``nij[0]``, ``nij[1]``; see
+    :func:`_behind`) is free without a test: the faces of a cube that touch one of its faces.
     """
     for c in range(3):
         lo[c] = min(vi[:, c].min(), vj[:, c].min())
@@ -1009,6 +1024,8 @@ def _classify_pair(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, nod
         met += 1
         if met == HULL_AFTER:
             n_planes = _hull_planes(vi, vj, planes, tol)
+        if behind >= 0.0 and (_behind(polys, kk, vi[0], nij[0], behind) or _behind(polys, kk, vj[0], nij[1], behind)):
+            continue
         state = _classify_one(vi, vj, polys, normal, center, inward, kk, tol, si, sj, outside, valid, gi, gj)
         if state == 1:
             return 1, 0
@@ -1105,13 +1122,16 @@ def _put_side(v, idx, a, b, fixed, out):
 
 @njit(cache=True, inline="always")
 def _group_status(P, nP, Q, nQ, polys, normal, center, inward, olo, ohi, node_lo, node_hi, node_left, node_right,
-                  node_start, node_count, order, pad, tol, stack, lo, hi, sp, sq, outside, valid, gp, gq):
+                  node_start, node_count, order, pad, tol, stack, lo, hi, sp, sq, outside, valid, gp, gq,
+                  fixed, behind):
     """0 / 1 if every pair of the set (see :func:`_classify_set`) is FREE / FULL, else 2; 3 if
     the set's box holds more than _GROUP_MAX_MET occluders (its pairs are walked one by one).
 
     The set's box holds every pair's box, so its BVH walk reaches every occluder a pair's walk
     does: all of them free means each pair is free; one full blocks each pair (a pair's walk
-    meets a full occluder, which crosses all its segments, and stops there)."""
+    meets a full occluder, which crosses all its segments, and stops there). With ``behind`` >= 0
+    an occluder behind the plane of the patch every pair shares (``fixed``: a point of it, its unit
+    normal) is free, as in :func:`_classify_pair`."""
     for c in range(3):
         lo[c] = min(P[:nP, c].min(), Q[:nQ, c].min())
         hi[c] = max(P[:nP, c].max(), Q[:nQ, c].max())
@@ -1128,6 +1148,8 @@ def _group_status(P, nP, Q, nQ, polys, normal, center, inward, olo, ohi, node_lo
         met += 1
         if met > _GROUP_MAX_MET:
             return 3
+        if behind >= 0.0 and _behind(polys, kk, fixed[0], fixed[1], behind):
+            continue
         state = _classify_set(P, nP, Q, nQ, polys, normal, center, inward, kk, tol, sp, sq, outside, valid,
                               gp, gq)
         if state == 1:
@@ -1139,7 +1161,8 @@ def _group_status(P, nP, Q, nQ, polys, normal, center, inward, olo, ohi, node_lo
 
 @njit(cache=True)
 def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, ohi, node_lo, node_hi, node_left,
-                    node_right, node_start, node_count, order, pad, tol, status, count, first, starts, occ):
+                    node_right, node_start, node_count, order, pad, tol, status, count, first, starts, occ,
+                    na, nb, behind):
     """Pairs s..e-1 of :func:`classify_pairs`: first pass (``starts`` empty) or second pass.
 
     In the first pass, runs of pairs with one receiver or one source are classified as a whole
@@ -1157,6 +1180,9 @@ def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, oh
     gi = np.empty((4, nv))
     gj = np.empty((4, nv))
     planes = np.empty((MAX_HULL_PLANES, 4))
+    use_normals = behind >= 0.0
+    nij = np.zeros((2, 3))  # the pair's unit normals (behind >= 0)
+    fixed = np.zeros((2, 3))  # a run's shared patch: a point, its unit normal (behind >= 0)
     width = first.shape[1]
     second = starts.shape[0] > 0
     if second:
@@ -1167,9 +1193,11 @@ def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, oh
                     occ[starts[p] + t] = first[p, t]
                 continue
             out = occ[starts[p]:starts[p + 1]]
+            if use_normals:
+                nij[0], nij[1] = na[ia[p]], nb[ib[p]]
             _classify_pair(va[ia[p]], vb[ib[p]], polys, normal, center, inward, olo, ohi, node_lo, node_hi,
                            node_left, node_right, node_start, node_count, order, pad, tol, out, stack, lo, hi,
-                           si, sj, outside, valid, gi, gj, planes)
+                           si, sj, outside, valid, gi, gj, planes, nij, behind)
         return
     nmax = max(8, va.shape[1], vb.shape[1])
     P, Q = np.empty((nmax, 3)), np.empty((nmax, 3))
@@ -1197,9 +1225,12 @@ def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, oh
         while n_ranges > 0 or single_from < single_to:
             if single_from < single_to:  # pairs one by one
                 for t in range(single_from, single_to):
+                    if use_normals:
+                        nij[0], nij[1] = na[ia[t]], nb[ib[t]]
                     st, n = _classify_pair(va[ia[t]], vb[ib[t]], polys, normal, center, inward, olo, ohi, node_lo,
                                            node_hi, node_left, node_right, node_start, node_count, order, pad, tol,
-                                           first[t], stack, lo, hi, si, sj, outside, valid, gi, gj, planes)
+                                           first[t], stack, lo, hi, si, sj, outside, valid, gi, gj, planes,
+                                           nij, behind)
                     status[t] = st
                     count[t] = n
                 single_from = single_to
@@ -1208,9 +1239,14 @@ def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, oh
             a, b = ranges[n_ranges, 0], ranges[n_ranges, 1]
             nP = _put_side(va, ia, a, b, same_a, P)
             nQ = _put_side(vb, ib, a, b, not same_a, Q)
+            if use_normals:  # the patch every pair of the run shares: a point of it, its normal
+                if same_a:
+                    fixed[0], fixed[1] = va[ia[a], 0], na[ia[a]]
+                else:
+                    fixed[0], fixed[1] = vb[ib[a], 0], nb[ib[a]]
             st = _group_status(P, nP, Q, nQ, polys, normal, center, inward, olo, ohi, node_lo, node_hi, node_left,
                                node_right, node_start, node_count, order, pad, tol, stack, lo, hi, sp, sq,
-                               outside, valid, gp, gq)
+                               outside, valid, gp, gq, fixed, behind)
             if st == 0 or st == 1:
                 for t in range(a, b):
                     status[t] = st
@@ -1227,11 +1263,13 @@ def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, oh
 
 @njit(cache=True, parallel=True)
 def classify_pairs(va, ia, vb, ib, polys, normal, center, inward, olo, ohi, node_lo, node_hi, node_left,
-                   node_right, node_start, node_count, order, pad, tol):
+                   node_right, node_start, node_count, order, pad, tol, na, nb, behind):
     """Classify pairs (va[ia[p]], vb[ib[p]]) against every occluder whose box meets theirs.
 
     The pair's box (vertex min/max) is walked down the occluders' BVH (boxes padded by ``pad``);
-    each occluder reached is classified by :func:`_classify_one`.
+    each occluder reached is classified by :func:`_classify_one`. With ``behind`` >= 0, occluders
+    within ``behind`` of the back of either patch's plane (unit normals ``na``, ``nb`` per row of
+    ``va``, ``vb``) are left out; with ``behind`` < 0, ``na`` and ``nb`` are not read (pass (1, 3)).
 
     Returns
     -------
@@ -1250,7 +1288,7 @@ def classify_pairs(va, ia, vb, ib, polys, normal, center, inward, olo, ohi, node
     for blk in prange(n_blocks):
         _classify_block(blk * _PAIR_BLOCK, min(m, (blk + 1) * _PAIR_BLOCK), va, ia, vb, ib, polys, normal, center,
                         inward, olo, ohi, node_lo, node_hi, node_left, node_right, node_start, node_count, order,
-                        pad, tol, status, count, first, none, none)
+                        pad, tol, status, count, first, none, none, na, nb, behind)
     starts = np.zeros(m + 1, np.int64)
     for p in range(m):
         starts[p + 1] = starts[p] + count[p]
@@ -1258,5 +1296,5 @@ def classify_pairs(va, ia, vb, ib, polys, normal, center, inward, olo, ohi, node
     for blk in prange(n_blocks):
         _classify_block(blk * _PAIR_BLOCK, min(m, (blk + 1) * _PAIR_BLOCK), va, ia, vb, ib, polys, normal, center,
                         inward, olo, ohi, node_lo, node_hi, node_left, node_right, node_start, node_count, order,
-                        pad, tol, status, count, first, starts, occ)
+                        pad, tol, status, count, first, starts, occ, na, nb, behind)
     return status, starts, occ

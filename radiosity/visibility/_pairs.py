@@ -236,6 +236,9 @@ class Visibility:
         self.n_rays = 0
         self.n_exact_rows = 0
         self.n_closed_culled = 0  # (pair, occluder) rows left out by closed-object culling
+        # leave out occluders behind either patch's plane in the classification (the hierarchy's
+        # elements: a cube face's element kept the faces of its cube that touch it)
+        self.cull_behind = False
         # receiver points whose shadow union GEOS could not compute directly (see _exact._unite)
         self.union_fallbacks: dict[str, int] = {}
 
@@ -268,7 +271,8 @@ class Visibility:
             return self._classify(self.quads[i], self.quads[j], np.minimum(self._lo[i], self._lo[j]),
                                   np.maximum(self._hi[i], self._hi[j]))
         i, j = np.asarray(i), np.asarray(j)
-        status, rows, occ = self._classify_pairs(self.quads, i, self.quads, j)
+        normals = self.normals if self.cull_behind else None
+        status, rows, occ = self._classify_pairs(self.quads, i, self.quads, j, normals)
         if self.closed and len(rows) and self.quads is self._windings_for:  # not for the hierarchy's elements
             status, rows, occ = self._cull_closed(i, j, status, rows, occ)
         return status, rows, occ
@@ -289,8 +293,11 @@ class Visibility:
         status[(status == MAYBE) & (left == 0)] = FREE  # every maybe occluder was one the pair can do without
         return status, rows[keep], occ[keep]
 
-    def _classify_pairs(self, va, ia, vb, ib):
-        """Compiled classification of pairs (va[ia], vb[ib]): BVH walk and exact test fused."""
+    def _classify_pairs(self, va, ia, vb, ib, normals=None):
+        """Compiled classification of pairs (va[ia], vb[ib]): BVH walk and exact test fused.
+
+        With ``normals`` (unit, per row of both va and vb), occluders behind either patch's
+        plane are left out (``cull_behind``)."""
         from ._exact_kernel import classify_pairs
 
         m = len(ia)
@@ -301,13 +308,18 @@ class Visibility:
         vb = np.ascontiguousarray(vb, dtype=np.float64)
         status = np.empty(m, np.int8)
         rows, occs = [], []
+        if normals is None:
+            normals, behind = np.zeros((1, 3)), -1.0
+        else:
+            normals, behind = np.ascontiguousarray(normals, dtype=np.float64), PLANE_REL * self.scale
         for s in range(0, m, CHUNK_CLASSIFY):
             e = min(m, s + CHUNK_CLASSIFY)
             st, starts, k = classify_pairs(va, np.ascontiguousarray(ia[s:e], dtype=np.int64), vb,
                                            np.ascontiguousarray(ib[s:e], dtype=np.int64), occ.polys, occ.normal,
                                            occ.center, occ.inward, occ.lo, occ.hi, occ.node_lo, occ.node_hi,
                                            occ.node_left, occ.node_right, occ.node_start, occ.node_count,
-                                           occ.order, PLANE_REL * self.scale, PLANE_REL * self.scale)
+                                           occ.order, PLANE_REL * self.scale, PLANE_REL * self.scale,
+                                           normals, normals, behind)
             status[s:e] = st
             rows.append(s + np.repeat(np.arange(e - s), np.diff(starts)))
             occs.append(k)

@@ -178,7 +178,7 @@ class SensorGather:
             status, starts, k = classify_pairs(vi, np.zeros(len(j), np.int64), self.quads, j, occ.polys, occ.normal,
                                                occ.center, occ.inward, occ.lo, occ.hi, occ.node_lo, occ.node_hi,
                                                occ.node_left, occ.node_right, occ.node_start, occ.node_count,
-                                               occ.order, self.tol, self.tol)
+                                               occ.order, self.tol, self.tol, np.zeros((1, 3)), np.zeros((1, 3)), -1.0)
             seen = np.where(status == 1, 0.0, f)
             part = np.flatnonzero(status == 2)
             if len(part):

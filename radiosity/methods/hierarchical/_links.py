@@ -19,14 +19,14 @@ import numpy as np
 
 from ...formfactors import lambert_indexed
 from ...formfactors import pair_factors, patch_points
-from ...visibility import FREE, FULL, MAYBE, Visibility
+from ...visibility import FULL, MAYBE, Visibility
 from ._elements import Elements
 
 __all__ = ["link_factors", "ElementVisibility", "adaptive_factors"]
 
 RECEIVER_ORDER = 3  # Gauss points per direction on the receiver: 9 Lambert evaluations per link
 SETTLE_RAY_SAMPLES = 5  # the many-occluder pairs of ElementVisibility.exact trace this**4 rays at least
-CULL_BEHIND = True  # leave out occluders behind either end's plane (ElementVisibility._classify)
+CULL_BEHIND = True  # leave out occluders behind either end's plane (ElementVisibility._over)
 MAX_EXACT_OCCLUDERS = 10  # visibility.MAX_UNION: more possible occluders a pair trace rays (ElementVisibility.exact)
 
 
@@ -93,7 +93,8 @@ class ElementVisibility:
         self.n_exact = 0
 
     def _over(self, el: Elements) -> Visibility:
-        """The patches' Visibility looking at the elements' geometry instead (same occluders)."""
+        """The patches' Visibility looking at the elements' geometry instead (same occluders),
+        leaving out occluders behind either element's plane."""
         view = copy.copy(self.patches)
         view.quads = el.quads
         view.normals = el.normal
@@ -101,28 +102,13 @@ class ElementVisibility:
         view._hi = el.quads.max(axis=1)
         view.n_rays = 0
         view.n_exact_rows = 0
+        # An occluder with no vertex in front of r's plane (or of s's) cannot cut a segment from
+        # a point of r to a point of s in front of it. Without that test a cube face kept the
+        # faces of its own cube that touch it as possible occluders, and every link of it was
+        # "partly visible" (issue 14). Done in numpy on the classification's output, the test
+        # took half the refinement of a furnished room; the kernel now makes it.
+        view.cull_behind = CULL_BEHIND
         return view
-
-    def _classify(self, view: Visibility, el: Elements, r: np.ndarray, s: np.ndarray):
-        """The classification of ``view``, without occluders behind either element's plane.
-
-        An occluder with no vertex in front of r's plane (or of s's) cannot cut a segment from
-        a point of r to a point of s in front of it. The classification does not test the
-        pair's own planes, so a cube face kept the faces of its own cube that touch it as
-        possible occluders, and every link of it was "partly visible" (issue 14). A partly
-        visible pair left with no occluder is free.
-        """
-        status, rows, occ = view.classify(r, s)
-        if CULL_BEHIND and len(rows):
-            polys = view.occluders.polys[occ]
-            tol = 1e-9 * view.scale
-            h_r = np.einsum("tkc,tc->tk", polys - el.centroid[r[rows]][:, None, :], el.normal[r[rows]])
-            h_s = np.einsum("tkc,tc->tk", polys - el.centroid[s[rows]][:, None, :], el.normal[s[rows]])
-            keep = (h_r.max(axis=1) > tol) & (h_s.max(axis=1) > tol)
-            rows, occ = rows[keep], occ[keep]
-            left = np.bincount(rows, minlength=len(r))
-            status = np.where((status == MAYBE) & (left == 0), FREE, status).astype(status.dtype)
-        return status, rows, occ
 
     def fractions(self, el: Elements, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Visible fraction and "partly visible" flag of each link (r receives from s).
@@ -141,7 +127,7 @@ class ElementVisibility:
         if m == 0:
             return visible, partial
         view = self._over(el)
-        status, rows, occ = self._classify(view, el, r, s)
+        status, rows, occ = view.classify(r, s)
         self.n_classified += m
         visible[status == FULL] = -1.0
         part = np.flatnonzero(status == MAYBE)
@@ -167,7 +153,7 @@ class ElementVisibility:
         if m == 0:
             return out
         view = self._over(el)
-        status, rows, occ = self._classify(view, el, r, s)
+        status, rows, occ = view.classify(r, s)
         out[status == FULL] = 0.0
         part = np.flatnonzero(status == MAYBE)
         if len(part):
