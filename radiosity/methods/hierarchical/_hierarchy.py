@@ -304,8 +304,12 @@ class Hierarchy:
         over[small] |= _past_budget(links.r[small], err[small], self.eps)
         return over
 
-    def _evaluate(self, r: np.ndarray, s: np.ndarray) -> Links:
+    def _evaluate(self, r: np.ndarray, s: np.ndarray, free: np.ndarray | None = None) -> Links:
         """Estimates of new links; those that cannot carry anything are dropped.
+
+        ``free`` (optional, bool per pair): pairs known to be unoccluded, children of a link
+        the classification found free (their segments are a subset of its segments), which
+        are not classified again.
 
         Dropped: pairs that do not face each other, and pairs an occluder blocks entirely. A
         pair the classification leaves undecided keeps its whole factor as doubt if its rays
@@ -323,7 +327,9 @@ class Hierarchy:
             factor, spread, peak = link_factors(self.el, rr, ss, peak=True)
             if NEAR_BOUND != "off":
                 spread = np.maximum(spread, _near_bound(self.el, rr, ss, NEAR_BOUND == "near") - (peak - spread))
-            visible, partial = self.vis.fractions(self.el, rr, ss)
+            visible, partial = np.ones(len(rr)), np.zeros(len(rr), bool)
+            ask = slice(None) if free is None else ~free[a:a + CHUNK_LINKS][facing]
+            visible[ask], partial[ask] = self.vis.fractions(self.el, rr[ask], ss[ask])
             keep = visible >= 0.0  # FULL pairs come back as -1
             # A crossing pair is as uncertain as its largest point value (the points do not
             # resolve where the plane cuts), or as its crude bound if every point missed.
@@ -335,8 +341,9 @@ class Hierarchy:
                                doubt[keep], partial[keep], np.zeros(n, bool)))
         return Links.concat(parts)
 
-    def _expand(self, links: Links) -> tuple[np.ndarray, np.ndarray]:
-        """The child links replacing ``links``: the larger end (if it can split) is split four ways."""
+    def _expand(self, links: Links) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The child links replacing ``links`` (the larger end, if it can split, is split four
+        ways), and which of them are free: the children of links nothing can block."""
         el = self.el
         can = el.splittable
         split_r = can[links.r] & ((el.area[links.r] >= el.area[links.s]) | ~can[links.s])
@@ -348,7 +355,8 @@ class Hierarchy:
         four = np.arange(4)
         r_new = np.concatenate([(first_r[:, None] + four).ravel(), np.repeat(links.r[~split_r], 4)])
         s_new = np.concatenate([np.repeat(links.s[split_r], 4), (first_s[:, None] + four).ravel()])
-        return r_new, s_new
+        free = ~links.partial
+        return r_new, s_new, np.concatenate([np.repeat(free[split_r], 4), np.repeat(free[~split_r], 4)])
 
     def _settle(self, links: Links) -> Links:
         """Links at the minimum size that still exceed eps: adaptive factors, exact shadows."""
@@ -457,9 +465,9 @@ class Hierarchy:
             todo = work.take(split)
             if not len(todo):
                 break
-            r, s = self._expand(todo)
+            r, s, free = self._expand(todo)
             self._check_memory(len(r) + sum(len(k) for k in kept))
-            work = self._evaluate(r, s)
+            work = self._evaluate(r, s, free)
         self.links = Links.concat(kept)
         self.stats.split_per_round.append(n_split)
         return n_split
