@@ -87,7 +87,9 @@ class Options:
         ``"uniform"`` fills the view-factor matrix of the cut patches; ``"hierarchical"``
         refines element quadtrees and links where they matter (``docs/hierarchical.md``);
         ``"auto"`` takes the hierarchy when the uniform fill would pair too many patches
-        (more than ``radiosity.solve.AUTO_MAX_PAIRS``: minutes and gigabytes), else uniform.
+        (more than ``radiosity.solve.AUTO_MAX_PAIRS``: minutes and gigabytes) or would be slow
+        (a sample of its pairs estimates more than ``radiosity.solve.AUTO_MAX_FILL_SECONDS``:
+        cluttered rooms), else uniform.
     link_tolerance : float
         Hierarchical only: a link is refined while a bound on the radiosity error it makes
         exceeds this fraction of the scene's mean emitted exitance (emitted power / area).

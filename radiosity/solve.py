@@ -34,6 +34,11 @@ METHODS = ("auto", "uniform", "hierarchical")
 # uniform fill then takes minutes and gigabytes (FIELD_NOTES: 9,504 patches 182 s / 3.6 GB,
 # 18,460 patches 717 s / 13 GB on 2 cores, growing as N^1.8).
 AUTO_MAX_PAIRS = 12_000 ** 2
+# method="auto" also takes the hierarchy when a sample of the uniform fill's pairs says the fill
+# would take longer than this on 2 cores (radiosity.methods.uniform.estimate); scenes with fewer
+# active patches than AUTO_SAMPLE_MIN are not sampled (at most 5e5 pairs: a few minutes at worst)
+AUTO_MAX_FILL_SECONDS = 600.0
+AUTO_SAMPLE_MIN = 1_000
 
 
 @dataclass
@@ -142,7 +147,8 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
         ``method="hierarchical"`` solves by hierarchical radiosity instead of the uniform
         fill (:mod:`radiosity.methods.hierarchical`); ``Solution.scene`` is then its leaves.
         ``method="auto"`` (the default) takes the hierarchy when the uniform fill would pair
-        more than ``AUTO_MAX_PAIRS`` patches (minutes, and gigabytes); the summary's
+        more than ``AUTO_MAX_PAIRS`` patches (minutes, and gigabytes), or would take more than
+        ``AUTO_MAX_FILL_SECONDS`` by an estimate from a sample of its pairs; the summary's
         ``method`` says which ran, and its notes why the hierarchy was taken.
 
     Returns
@@ -172,7 +178,7 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     cut = _cut(scene, options)
     cut_seconds = time.perf_counter() - t0
     if options.method == "auto":
-        method, note = _auto_method(cut.n_patches)  # options keep "auto"; the summary says which ran
+        method, note = _auto_method(cut, options)  # options keep "auto"; the summary says which ran
         if method == "hierarchical":
             return _solve_hierarchical(replace(scene, notes=scene.notes + (note,)), options)
     try:
@@ -254,19 +260,35 @@ def _solve_out_of_core(cut, options, refusal: MemoryBudgetError, timings: dict[s
                     solver=report, energy=balance, view_factor_storage=storage)
 
 
-def _auto_method(n_patches: int) -> tuple[str, str]:
-    """The method ``method="auto"`` takes for a scene cut into ``n_patches``, and a note why.
+def _auto_method(cut: Scene, options: Options) -> tuple[str, str]:
+    """The method ``method="auto"`` takes for a scene cut to size, and a note why.
 
-    Only the pair count decides: a fill that does not fit a small budget (but pairs few
-    patches) still goes out of core, as a uniform solve does; under the default budget
-    (a share of the machine's memory) the pair count is the first to tip.
+    The hierarchy when the uniform fill would pair more than ``AUTO_MAX_PAIRS`` patches (a
+    fill that does not fit a small budget but pairs few patches still goes out of core, as a
+    uniform solve does), or when a sample of its pairs says it would take more than
+    ``AUTO_MAX_FILL_SECONDS`` (:mod:`radiosity.methods.uniform.estimate`: the clutter of a
+    furnished room, not its size, makes its fill slow). Scenes of fewer than
+    ``AUTO_SAMPLE_MIN`` active patches are not sampled.
     """
-    pairs = n_patches ** 2
-    if pairs <= AUTO_MAX_PAIRS:
+    pairs = cut.n_patches ** 2
+    if pairs > AUTO_MAX_PAIRS:
+        need = _memory.format_bytes(_memory.fill_bytes(cut.n_patches))
+        return "hierarchical", (f"method auto: hierarchical, since the uniform fill would pair {cut.n_patches:,} "
+                                f"patches ({pairs:.2g} pairs > {AUTO_MAX_PAIRS:.2g}, up to {need}); "
+                                f"--method uniform overrides")
+    active = ~_inactive(cut)
+    if active.sum() < AUTO_SAMPLE_MIN:
         return "uniform", ""
-    need = _memory.format_bytes(_memory.fill_bytes(n_patches))
-    return "hierarchical", (f"method auto: hierarchical, since the uniform fill would pair {n_patches:,} patches "
-                            f"({pairs:.2g} pairs > {AUTO_MAX_PAIRS:.2g}, up to {need}); --method uniform overrides")
+    from .methods.uniform.estimate import estimate_fill
+
+    settings = _fill_settings(options)
+    visibility = Visibility(cut.patch_quads, cut.patch_normal, cut.patch_object, cut.scale,
+                            samples=settings.visibility_samples, max_samples=settings.visibility_max_samples)
+    estimate = estimate_fill(cut.patch_quads, cut.patch_normal, visibility, settings, active)
+    if estimate.seconds <= AUTO_MAX_FILL_SECONDS:
+        return "uniform", ""
+    return "hierarchical", (f"method auto: hierarchical, since the uniform fill of {cut.n_patches:,} patches "
+                            f"would take {estimate.describe()}; --method uniform overrides")
 
 
 def _solve_hierarchical(scene: Scene, options: Options) -> Solution:

@@ -16,7 +16,7 @@ from radiosity.methods.hierarchical._elements import Elements, split_quads
 from radiosity.options import Options
 from radiosity.geometry import centroids_and_areas
 
-from helpers import axis_box, write_obj
+from helpers import axis_box, cube_room_scene, make_vis, rect, write_obj
 
 REFERENCE = Path(__file__).parent / "data" / "cornell_uniform_default.json"
 
@@ -266,6 +266,40 @@ def test_auto_takes_the_hierarchy_past_the_pair_budget(furnace, monkeypatch):
     forced = radiosity.solve(furnace, method="uniform", **knobs)
     assert forced.summary()["method"] == "uniform"
     np.testing.assert_allclose(chosen.object_radiosity()["room"], forced.object_radiosity()["room"], rtol=0.05)
+
+
+def test_auto_takes_the_hierarchy_when_a_sample_says_the_fill_is_slow(monkeypatch):
+    """auto samples the fill's pairs once a scene has AUTO_SAMPLE_MIN active patches: the
+    hierarchy, with the estimate in its note, when the sampled fill is over AUTO_MAX_FILL_SECONDS."""
+    import importlib
+
+    solve_module = importlib.import_module("radiosity.solve")
+    scene = cube_room_scene(8)
+    knobs = dict(preset="draft", cache=False, link_tolerance=5e-2, min_element_rel=1 / 5)
+    monkeypatch.setattr(solve_module, "AUTO_SAMPLE_MIN", 10)
+    assert radiosity.solve(scene, **knobs).summary()["method"] == "uniform"  # about a second
+    monkeypatch.setattr(solve_module, "AUTO_MAX_FILL_SECONDS", 1e-3)
+    summary = radiosity.solve(scene, **knobs).summary()
+    assert summary["method"] == "hierarchical"
+    note = next(n for n in summary["notes"] if n.startswith("method auto: hierarchical"))
+    assert "would take about" in note and "sampled pairs" in note and "partly occluded" in note
+
+
+def test_fill_estimate_counts_the_facing_pairs_of_open_plates():
+    """Two facing plates cut n x n, nothing between: half the ordered pairs face (plate to
+    plate), none is partly occluded; the sample is seeded, so the estimate repeats."""
+    from radiosity.methods.uniform.assembly import FillSettings
+    from radiosity.methods.uniform.estimate import estimate_fill
+
+    n = 6
+    cells = [(x, x + 1 / n, y, y + 1 / n) for x in np.arange(n) / n for y in np.arange(n) / n]
+    quads = np.array([rect(*c, 0.0) for c in cells] + [rect(*c, 1.0, down=True) for c in cells])
+    vis = make_vis(quads)
+    first = estimate_fill(quads, vis.normals, vis, FillSettings(), np.ones(len(quads), bool))
+    assert first.partial_pairs == 0 and first.occluders_squared == 0
+    assert first.facing_pairs == pytest.approx(n ** 4, rel=0.03)
+    assert first == estimate_fill(quads, vis.normals, vis, FillSettings(), np.ones(len(quads), bool))
+    assert first.seconds > 0 and "0% of" in first.describe()
 
 
 def test_push_pull_conserves_power_through_clusters(furnace):
