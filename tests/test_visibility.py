@@ -243,6 +243,10 @@ def test_runs_of_pairs_classified_whole_match_pairs_one_by_one():
         status, rows, occ = vis._classify_pairs(quads, a, quads, b)
         s2, rows2, occ2 = vis._classify_pairs(quads, a[perm], quads, b[perm])
         np.testing.assert_array_equal(s2, status[perm])
+        s3, rows3, occ3 = vis._classify_pairs(quads, a, quads, b, runs=False)  # no runs at all
+        np.testing.assert_array_equal(s3, status)
+        np.testing.assert_array_equal(rows3, rows)
+        np.testing.assert_array_equal(occ3, occ)
         assert list(zip(perm[rows2].tolist(), occ2.tolist())) == \
             sorted(zip(rows.tolist(), occ.tolist()), key=lambda r: where[r[0]])
         assert {FREE, FULL, MAYBE} <= set(status.tolist())

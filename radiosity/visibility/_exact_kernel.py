@@ -1162,13 +1162,15 @@ def _group_status(P, nP, Q, nQ, polys, normal, center, inward, olo, ohi, node_lo
 @njit(cache=True)
 def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, ohi, node_lo, node_hi, node_left,
                     node_right, node_start, node_count, order, pad, tol, status, count, first, starts, occ,
-                    na, nb, behind):
+                    na, nb, behind, runs):
     """Pairs s..e-1 of :func:`classify_pairs`: first pass (``starts`` empty) or second pass.
 
     In the first pass, runs of pairs with one receiver or one source are classified as a whole
     first (:func:`_group_status`); only the pairs of undecided runs are walked one by one, with
     the same results bit for bit (the fill's pairs come in runs of one source: on the blocked
-    plates of bench_fill most runs of 4-32 pairs are all free or all blocked)."""
+    plates of bench_fill most runs of 4-32 pairs are all free or all blocked). ``runs`` False
+    walks every pair alone (the hierarchy's children of a partly visible link: four children
+    together span their parent, whose walk was undecided)."""
     nv = polys.shape[1]
     stack = np.empty(2 * node_lo.shape[0] + 2, np.int64)
     lo = np.empty(3)
@@ -1206,14 +1208,14 @@ def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, oh
     ranges = np.empty((64, 2), np.int64)
     p = s
     while p < e:
-        # the run from p: pairs sharing ia[p] (or else ib[p]), at most _GROUP_MAX
+        # the run from p: pairs sharing ia[p] (or else ib[p]), at most _GROUP_MAX (none without runs)
         q = p + 1
-        while q < e and q - p < _GROUP_MAX and ia[q] == ia[p]:
+        while runs and q < e and q - p < _GROUP_MAX and ia[q] == ia[p]:
             q += 1
         same_a = q - p >= _GROUP_MIN
         if not same_a:
             q = p + 1
-            while q < e and q - p < _GROUP_MAX and ib[q] == ib[p]:
+            while runs and q < e and q - p < _GROUP_MAX and ib[q] == ib[p]:
                 q += 1
         n_ranges = 0
         if q - p >= _GROUP_MIN:
@@ -1263,13 +1265,14 @@ def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, oh
 
 @njit(cache=True, parallel=True)
 def classify_pairs(va, ia, vb, ib, polys, normal, center, inward, olo, ohi, node_lo, node_hi, node_left,
-                   node_right, node_start, node_count, order, pad, tol, na, nb, behind):
+                   node_right, node_start, node_count, order, pad, tol, na, nb, behind, runs=True):
     """Classify pairs (va[ia[p]], vb[ib[p]]) against every occluder whose box meets theirs.
 
     The pair's box (vertex min/max) is walked down the occluders' BVH (boxes padded by ``pad``);
     each occluder reached is classified by :func:`_classify_one`. With ``behind`` >= 0, occluders
     within ``behind`` of the back of either patch's plane (unit normals ``na``, ``nb`` per row of
     ``va``, ``vb``) are left out; with ``behind`` < 0, ``na`` and ``nb`` are not read (pass (1, 3)).
+    ``runs`` False: no runs of pairs are classified as a whole (see :func:`_classify_block`).
 
     Returns
     -------
@@ -1288,7 +1291,7 @@ def classify_pairs(va, ia, vb, ib, polys, normal, center, inward, olo, ohi, node
     for blk in prange(n_blocks):
         _classify_block(blk * _PAIR_BLOCK, min(m, (blk + 1) * _PAIR_BLOCK), va, ia, vb, ib, polys, normal, center,
                         inward, olo, ohi, node_lo, node_hi, node_left, node_right, node_start, node_count, order,
-                        pad, tol, status, count, first, none, none, na, nb, behind)
+                        pad, tol, status, count, first, none, none, na, nb, behind, runs)
     starts = np.zeros(m + 1, np.int64)
     for p in range(m):
         starts[p + 1] = starts[p] + count[p]
@@ -1296,5 +1299,5 @@ def classify_pairs(va, ia, vb, ib, polys, normal, center, inward, olo, ohi, node
     for blk in prange(n_blocks):
         _classify_block(blk * _PAIR_BLOCK, min(m, (blk + 1) * _PAIR_BLOCK), va, ia, vb, ib, polys, normal, center,
                         inward, olo, ohi, node_lo, node_hi, node_left, node_right, node_start, node_count, order,
-                        pad, tol, status, count, first, starts, occ, na, nb, behind)
+                        pad, tol, status, count, first, starts, occ, na, nb, behind, runs)
     return status, starts, occ

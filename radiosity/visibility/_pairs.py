@@ -255,8 +255,12 @@ class Visibility:
         return note
 
     # ------------------------------------------------------------------ classification
-    def classify(self, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def classify(self, i: np.ndarray, j: np.ndarray, *, runs: bool = True
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Classify pairs (i receives from j) before any ray.
+
+        ``runs`` False walks each pair alone, where runs of pairs sharing a patch are known to
+        be undecided as a whole (the same status either way).
 
         Returns
         -------
@@ -272,7 +276,7 @@ class Visibility:
                                   np.maximum(self._hi[i], self._hi[j]))
         i, j = np.asarray(i), np.asarray(j)
         normals = self.normals if self.cull_behind else None
-        status, rows, occ = self._classify_pairs(self.quads, i, self.quads, j, normals)
+        status, rows, occ = self._classify_pairs(self.quads, i, self.quads, j, normals, runs)
         if self.closed and len(rows) and self.quads is self._windings_for:  # not for the hierarchy's elements
             status, rows, occ = self._cull_closed(i, j, status, rows, occ)
         return status, rows, occ
@@ -293,7 +297,7 @@ class Visibility:
         status[(status == MAYBE) & (left == 0)] = FREE  # every maybe occluder was one the pair can do without
         return status, rows[keep], occ[keep]
 
-    def _classify_pairs(self, va, ia, vb, ib, normals=None):
+    def _classify_pairs(self, va, ia, vb, ib, normals=None, runs=True):
         """Compiled classification of pairs (va[ia], vb[ib]): BVH walk and exact test fused.
 
         With ``normals`` (unit, per row of both va and vb), occluders behind either patch's
@@ -319,7 +323,7 @@ class Visibility:
                                            occ.center, occ.inward, occ.lo, occ.hi, occ.node_lo, occ.node_hi,
                                            occ.node_left, occ.node_right, occ.node_start, occ.node_count,
                                            occ.order, PLANE_REL * self.scale, PLANE_REL * self.scale,
-                                           normals, normals, behind)
+                                           normals, normals, behind, runs)
             status[s:e] = st
             rows.append(s + np.repeat(np.arange(e - s), np.diff(starts)))
             occs.append(k)

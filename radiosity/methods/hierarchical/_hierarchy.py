@@ -329,7 +329,7 @@ class Hierarchy:
                 spread = np.maximum(spread, _near_bound(self.el, rr, ss, NEAR_BOUND == "near") - (peak - spread))
             visible, partial = np.ones(len(rr)), np.zeros(len(rr), bool)
             ask = slice(None) if free is None else ~free[a:a + CHUNK_LINKS][facing]
-            visible[ask], partial[ask] = self.vis.fractions(self.el, rr[ask], ss[ask])
+            visible[ask], partial[ask] = self.vis.fractions(self.el, rr[ask], ss[ask], children=free is not None)
             keep = visible >= 0.0  # FULL pairs come back as -1
             # A crossing pair is as uncertain as its largest point value (the points do not
             # resolve where the plane cuts), or as its crude bound if every point missed.

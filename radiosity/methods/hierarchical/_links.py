@@ -110,8 +110,12 @@ class ElementVisibility:
         view.cull_behind = CULL_BEHIND
         return view
 
-    def fractions(self, el: Elements, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def fractions(self, el: Elements, r: np.ndarray, s: np.ndarray, *, children: bool = False
+                  ) -> tuple[np.ndarray, np.ndarray]:
         """Visible fraction and "partly visible" flag of each link (r receives from s).
+
+        ``children``: the links are children of partly visible links, four by four; the
+        classification then walks each alone (four children span their parent, undecided).
 
         Returns
         -------
@@ -127,7 +131,7 @@ class ElementVisibility:
         if m == 0:
             return visible, partial
         view = self._over(el)
-        status, rows, occ = view.classify(r, s)
+        status, rows, occ = view.classify(r, s, runs=not children)
         self.n_classified += m
         visible[status == FULL] = -1.0
         part = np.flatnonzero(status == MAYBE)
