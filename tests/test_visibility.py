@@ -282,6 +282,29 @@ def test_culling_behind_either_plane_drops_exactly_the_occluders_behind():
     np.testing.assert_array_equal(shuffled, status[perm])
 
 
+def test_classification_against_listed_candidates_matches_the_walk():
+    """``classify_listed`` (the hierarchy's children, against their parent's undecided
+    occluders) gives the BVH walk's status and occluders when the candidates hold every
+    occluder the walk can reach: here all of them, with and without ``cull_behind``; a pair
+    whose candidates miss its only blocker is free, as the list says."""
+    quads, groups = boxes_scene()
+    vis = make_vis(quads, groups)
+    vis.closed = False
+    i, j = all_pairs(len(quads))
+    every = np.arange(vis.occluders.n_occluders)
+    starts = np.arange(len(i) + 1) * len(every)
+    for behind in (False, True):
+        vis.cull_behind = behind
+        walk = vis.classify(i, j, runs=False)
+        listed = vis.classify_listed(i, j, starts, np.tile(every, len(i)))
+        np.testing.assert_array_equal(listed[0], walk[0])
+        assert sorted(zip(*(a.tolist() for a in listed[1:]))) == sorted(zip(*(a.tolist() for a in walk[1:])))
+        assert {FREE, FULL, MAYBE} <= set(walk[0].tolist())
+    blocked = np.flatnonzero(walk[0] == FULL)[:5]
+    none = vis.classify_listed(i[blocked], j[blocked], np.zeros(len(blocked) + 1, np.int64), np.zeros(0, np.int64))
+    assert (none[0] == FREE).all()
+
+
 def test_occluder_mask_kernel_matches_numpy_reference():
     """The compiled on-facet test of occluder_mask gives the numpy form's mask."""
     from scipy.spatial import ConvexHull

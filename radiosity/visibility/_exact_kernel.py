@@ -1301,3 +1301,67 @@ def classify_pairs(va, ia, vb, ib, polys, normal, center, inward, olo, ohi, node
                         inward, olo, ohi, node_lo, node_hi, node_left, node_right, node_start, node_count, order,
                         pad, tol, status, count, first, starts, occ, na, nb, behind, runs)
     return status, starts, occ
+
+
+@njit(cache=True, parallel=True)
+def classify_listed(va, ia, vb, ib, na, nb, cand_starts, cand_occ, polys, normal, center, inward, olo, ohi, pad, tol,
+                    behind):
+    """:func:`classify_pairs` against given candidates instead of the BVH: pair p against the
+    occluders ``cand_occ[cand_starts[p]:cand_starts[p + 1]]`` only.
+
+    For pairs whose segments are a subset of another pair's (an element's children), the
+    other's undecided occluders hold every occluder that can be undecided or full for them.
+    Each candidate is tested as the walk tests what it reaches: its box against the pair's
+    box (padded), beyond the faces of the pair's hull when there are ``HULL_AFTER`` or more
+    candidates, behind either patch's plane (``behind`` >= 0; unit normals ``na``, ``nb``), then
+    :func:`_classify_one`. Returns (status, starts, occ) as :func:`classify_pairs` does.
+    """
+    m = ia.shape[0]
+    status = np.zeros(m, np.int8)
+    count = np.zeros(m, np.int64)
+    found = np.empty(cand_occ.shape[0], np.int64)
+    nv = polys.shape[1]
+    nvi, nvj = va.shape[1], vb.shape[1]
+    n_blocks = (m + _PAIR_BLOCK - 1) // _PAIR_BLOCK
+    for blk in prange(n_blocks):
+        si, sj = np.empty(nvi), np.empty(nvj)
+        outside = np.zeros(nv, np.bool_)
+        valid = np.zeros(nv, np.bool_)
+        gi, gj = np.empty((nvi, nv)), np.empty((nvj, nv))
+        lo, hi = np.empty(3), np.empty(3)
+        planes = np.empty((MAX_HULL_PLANES, 4))
+        for p in range(blk * _PAIR_BLOCK, min(m, (blk + 1) * _PAIR_BLOCK)):
+            vi, vj = va[ia[p]], vb[ib[p]]
+            for c in range(3):
+                lo[c] = min(vi[:, c].min(), vj[:, c].min())
+                hi[c] = max(vi[:, c].max(), vj[:, c].max())
+            first, last = cand_starts[p], cand_starts[p + 1]
+            n_planes = _hull_planes(vi, vj, planes, tol) if last - first >= HULL_AFTER else 0
+            n = 0
+            full = False
+            for t in range(first, last):
+                kk = cand_occ[t]
+                if not _meets(lo, hi, olo[kk], ohi[kk], pad):
+                    continue
+                if n_planes and _beyond_planes(olo[kk], ohi[kk], planes, n_planes, pad):
+                    continue
+                if behind >= 0.0 and (_behind(polys, kk, vi[0], na[ia[p]], behind)
+                                      or _behind(polys, kk, vj[0], nb[ib[p]], behind)):
+                    continue
+                state = _classify_one(vi, vj, polys, normal, center, inward, kk, tol, si, sj, outside, valid, gi, gj)
+                if state == 1:
+                    full = True
+                    break
+                if state == 2:
+                    found[first + n] = kk
+                    n += 1
+            status[p] = 1 if full else (2 if n else 0)
+            count[p] = 0 if full else n
+    starts = np.zeros(m + 1, np.int64)
+    for p in range(m):
+        starts[p + 1] = starts[p] + count[p]
+    occ = np.empty(starts[m], np.int64)
+    for p in prange(m):
+        for t in range(count[p]):
+            occ[starts[p] + t] = found[cand_starts[p] + t]
+    return status, starts, occ

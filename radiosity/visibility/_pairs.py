@@ -281,6 +281,33 @@ class Visibility:
             status, rows, occ = self._cull_closed(i, j, status, rows, occ)
         return status, rows, occ
 
+    def classify_listed(self, i: np.ndarray, j: np.ndarray, starts: np.ndarray, candidates: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`classify` against given possible occluders instead of the BVH: pair t
+        (i[t] receives from j[t]) against ``candidates[starts[t]:starts[t + 1]]``.
+
+        Only right where those hold every occluder the pair's own walk would find undecided or
+        full, as the undecided occluders of a pair whose segments hold the pair's (a link's
+        children in the hierarchy). No closed-object culling.
+        """
+        from ._exact_kernel import classify_listed
+
+        m = len(i)
+        occ = self.occluders
+        if occ.n_occluders == 0 or m == 0:
+            return np.full(m, FREE, np.int8), np.zeros(0, np.int64), np.zeros(0, np.int64)
+        if self.cull_behind:
+            normals, behind = self.normals, PLANE_REL * self.scale
+        else:
+            normals, behind = np.zeros((1, 3)), -1.0
+        tol = PLANE_REL * self.scale
+        status, out_starts, out = classify_listed(self.quads, np.ascontiguousarray(i, dtype=np.int64), self.quads,
+                                                  np.ascontiguousarray(j, dtype=np.int64), normals, normals,
+                                                  np.ascontiguousarray(starts, dtype=np.int64),
+                                                  np.ascontiguousarray(candidates, dtype=np.int64), occ.polys,
+                                                  occ.normal, occ.center, occ.inward, occ.lo, occ.hi, tol, tol, behind)
+        return status, np.repeat(np.arange(m), np.diff(out_starts)), out
+
     def _cull_closed(self, i, j, status, rows, occ):
         """Leave out the closed objects' faces that a partly occluded pair can do without."""
         from ._closed import closed_cull, winding_labels

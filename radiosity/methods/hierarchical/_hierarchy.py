@@ -97,6 +97,9 @@ NEAR_BOUND = "near"
 NEAR_SMALLER = 0.5  # ... and the source's radius is below this share of r's
 NEAR_RELATIVE = 2.0  # "near": the source's sphere comes closer to r's centroid than this many r radii
 SETTLE_LATER = True
+# Children of a partly visible link are classified against its undecided occluders (kept while
+# it may split in the same pass) instead of walking the occluders' BVH again.
+INHERIT_OCCLUDERS = True
 # Share of an undecided link's factor left in doubt when all its rays agree (see _visibility_doubt).
 UNANIMOUS_DOUBT = 1.0
 
@@ -131,6 +134,30 @@ class Links:
     def concat(parts: list["Links"]) -> "Links":
         parts = [p for p in parts if len(p)] or [Links.empty()]
         return Links(*(np.concatenate([getattr(p, f) for p in parts]) for f in Links.__dataclass_fields__))
+
+
+@dataclass
+class Undecided:
+    """The undecided occluders of each link of a :class:`Links` (none for links found free),
+    kept while its links may split: their children are classified against them only."""
+
+    count: np.ndarray  # (n_links,) int
+    occ: np.ndarray  # (count.sum(),) int, link after link
+
+    def take(self, mask) -> "Undecided":
+        return Undecided(self.count[mask], self.occ[np.repeat(mask, self.count)])
+
+    @staticmethod
+    def concat(parts: list["Undecided"]) -> "Undecided":
+        return Undecided(np.concatenate([p.count for p in parts]), np.concatenate([p.occ for p in parts]))
+
+    def of(self, parent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(starts, occluders), CSR over ``parent``: each entry's link's undecided occluders."""
+        first = np.concatenate([[0], np.cumsum(self.count)])[parent]
+        count = self.count[parent]
+        starts = np.concatenate([[0], np.cumsum(count)])
+        at = np.repeat(first - starts[:-1], count) + np.arange(starts[-1])
+        return starts, self.occ[at]
 
 
 class LinkOperator(spla.LinearOperator):
@@ -304,12 +331,16 @@ class Hierarchy:
         over[small] |= _past_budget(links.r[small], err[small], self.eps)
         return over
 
-    def _evaluate(self, r: np.ndarray, s: np.ndarray, free: np.ndarray | None = None) -> Links:
-        """Estimates of new links; those that cannot carry anything are dropped.
+    def _evaluate(self, r: np.ndarray, s: np.ndarray,
+                  parents: tuple[Links, Undecided | None, np.ndarray] | None = None) -> tuple[Links, Undecided]:
+        """Estimates of new links, those that cannot carry anything dropped, and their undecided
+        occluders.
 
-        ``free`` (optional, bool per pair): pairs known to be unoccluded, children of a link
-        the classification found free (their segments are a subset of its segments), which
-        are not classified again.
+        ``parents`` (optional): (links, their undecided occluders or None if not kept, the index
+        of each pair's parent among them) when the pairs are children of split links. A child's
+        segments are a subset of its parent's, so a child of a free link is free without a test,
+        and a child of a partly visible one is classified against its parent's undecided
+        occluders only (by a walk of the BVH where they were not kept).
 
         Dropped: pairs that do not face each other, and pairs an occluder blocks entirely. A
         pair the classification leaves undecided keeps its whole factor as doubt if its rays
@@ -317,7 +348,7 @@ class Hierarchy:
         crosses the other's plane its largest point value (its Gauss points do not resolve
         where the plane cuts): such links refine until their doubt meets ``eps``.
         """
-        parts = []
+        parts, lists = [], []
         for a in range(0, len(r), CHUNK_LINKS):
             rr, ss = r[a:a + CHUNK_LINKS], s[a:a + CHUNK_LINKS]
             self.stats.links_evaluated += len(rr)
@@ -327,9 +358,8 @@ class Hierarchy:
             factor, spread, peak = link_factors(self.el, rr, ss, peak=True)
             if NEAR_BOUND != "off":
                 spread = np.maximum(spread, _near_bound(self.el, rr, ss, NEAR_BOUND == "near") - (peak - spread))
-            visible, partial = np.ones(len(rr)), np.zeros(len(rr), bool)
-            ask = slice(None) if free is None else ~free[a:a + CHUNK_LINKS][facing]
-            visible[ask], partial[ask] = self.vis.fractions(self.el, rr[ask], ss[ask], children=free is not None)
+            visible, partial, count, occ = self._visibility(rr, ss, None if parents is None else
+                                                            parents[2][a:a + CHUNK_LINKS][facing], parents)
             keep = visible >= 0.0  # FULL pairs come back as -1
             # A crossing pair is as uncertain as its largest point value (the points do not
             # resolve where the plane cuts), or as its crude bound if every point missed.
@@ -339,11 +369,30 @@ class Hierarchy:
             n = int(keep.sum())
             parts.append(Links(rr[keep], ss[keep], factor[keep], spread[keep], np.clip(visible[keep], 0, 1),
                                doubt[keep], partial[keep], np.zeros(n, bool)))
-        return Links.concat(parts)
+            lists.append(Undecided(count, occ).take(keep))
+        if not parts:
+            return Links.empty(), Undecided(np.zeros(0, np.int64), np.zeros(0, np.int64))
+        return Links.concat(parts), Undecided.concat(lists)
+
+    def _visibility(self, r: np.ndarray, s: np.ndarray, parent: np.ndarray | None,
+                    parents: tuple[Links, Undecided | None, np.ndarray] | None):
+        """(visible, partial, count, occluders) of pairs (see :meth:`ElementVisibility.fractions_undecided`);
+        children of free links are free, children of partly visible ones take their parent's
+        undecided occluders as candidates."""
+        if parents is None:
+            return self.vis.fractions_undecided(self.el, r, s)
+        links, undecided, _ = parents
+        m = len(r)
+        visible, partial, count = np.ones(m), np.zeros(m, bool), np.zeros(m, np.int64)
+        ask = links.partial[parent]
+        candidates = undecided.of(parent[ask]) if INHERIT_OCCLUDERS and undecided is not None else None
+        visible[ask], partial[ask], count[ask], occ = self.vis.fractions_undecided(
+            self.el, r[ask], s[ask], children=True, candidates=candidates)
+        return visible, partial, count, occ
 
     def _expand(self, links: Links) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The child links replacing ``links`` (the larger end, if it can split, is split four
-        ways), and which of them are free: the children of links nothing can block."""
+        ways), and the index of each child's parent in ``links``."""
         el = self.el
         can = el.splittable
         split_r = can[links.r] & ((el.area[links.r] >= el.area[links.s]) | ~can[links.s])
@@ -355,8 +404,8 @@ class Hierarchy:
         four = np.arange(4)
         r_new = np.concatenate([(first_r[:, None] + four).ravel(), np.repeat(links.r[~split_r], 4)])
         s_new = np.concatenate([np.repeat(links.s[split_r], 4), (first_s[:, None] + four).ravel()])
-        free = ~links.partial
-        return r_new, s_new, np.concatenate([np.repeat(free[split_r], 4), np.repeat(free[~split_r], 4)])
+        parent = np.concatenate([np.repeat(np.flatnonzero(split_r), 4), np.repeat(np.flatnonzero(~split_r), 4)])
+        return r_new, s_new, parent
 
     def _settle(self, links: Links) -> Links:
         """Links at the minimum size that still exceed eps: adaptive factors, exact shadows."""
@@ -431,7 +480,7 @@ class Hierarchy:
             else:
                 r, s, n_cluster_split = self._refine_clusters(np.zeros(1, np.int64), np.zeros(1, np.int64))
             self.stats.initial_links = len(r) + len(self.cluster_r)
-            work = self._evaluate(r, s)
+            work, undecided = self._evaluate(r, s)
             kept = []
             n_first = 0
         else:
@@ -449,10 +498,13 @@ class Hierarchy:
                 kept.append(self.links.take(stuck))
             work = self.links.take(split)
             n_first = int(split.sum())
-            work = self._evaluate(*self._expand(work)) if len(work) else work
+            # the undecided occluders of earlier rounds' links are not kept: their children walk
+            r, s, parent = self._expand(work)
+            work, undecided = self._evaluate(r, s, (work, None, parent))
             if self.tree is not None:
                 r, s, n_cluster_split = self._refine_clusters(self.cluster_r, self.cluster_s)
-                work = Links.concat([work, self._evaluate(r, s)])
+                more, more_undecided = self._evaluate(r, s)
+                work, undecided = Links.concat([work, more]), Undecided.concat([undecided, more_undecided])
         n_split = n_first + n_cluster_split
         while len(work):
             over = self._over(work)
@@ -462,12 +514,12 @@ class Hierarchy:
             kept.append(work.take(~over | work.settled))
             kept.append(self._settle(work.take(stuck)))
             n_split += int(split.sum())
-            todo = work.take(split)
+            todo, todo_undecided = work.take(split), undecided.take(split)
             if not len(todo):
                 break
-            r, s, free = self._expand(todo)
+            r, s, parent = self._expand(todo)
             self._check_memory(len(r) + sum(len(k) for k in kept))
-            work = self._evaluate(r, s, free)
+            work, undecided = self._evaluate(r, s, (todo, todo_undecided, parent))
         self.links = Links.concat(kept)
         self.stats.split_per_round.append(n_split)
         return n_split

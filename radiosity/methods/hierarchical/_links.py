@@ -110,12 +110,8 @@ class ElementVisibility:
         view.cull_behind = CULL_BEHIND
         return view
 
-    def fractions(self, el: Elements, r: np.ndarray, s: np.ndarray, *, children: bool = False
-                  ) -> tuple[np.ndarray, np.ndarray]:
+    def fractions(self, el: Elements, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Visible fraction and "partly visible" flag of each link (r receives from s).
-
-        ``children``: the links are children of partly visible links, four by four; the
-        classification then walks each alone (four children span their parent, undecided).
 
         Returns
         -------
@@ -125,13 +121,44 @@ class ElementVisibility:
         partial : (m,) bool
             The classification left the pair undecided (partly visible, whatever the rays say).
         """
+        visible, partial, _, _ = self.fractions_undecided(el, r, s)
+        return visible, partial
+
+    def fractions_undecided(self, el: Elements, r: np.ndarray, s: np.ndarray, *, children: bool = False,
+                            candidates: tuple[np.ndarray, np.ndarray] | None = None
+                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`fractions`, and the undecided occluders of each pair (what its children may
+        be classified against).
+
+        Parameters
+        ----------
+        children : bool
+            The links are children of partly visible links, four by four: the classification
+            walks each alone (four children span their parent, whose walk was undecided).
+        candidates : (starts, occluders), optional
+            Possible occluders of each pair, CSR over the pairs: the undecided occluders of
+            its parent link, whose segments hold its own. The pairs are classified against
+            those only, not by a walk of the occluders' BVH.
+
+        Returns
+        -------
+        visible, partial : (m,)
+            As :meth:`fractions`.
+        count : (m,) int
+            Undecided occluders of each pair (0 unless partly visible).
+        occluders : (count.sum(),) int
+            Those occluders, pair after pair.
+        """
         m = len(r)
         visible = np.ones(m)
         partial = np.zeros(m, bool)
         if m == 0:
-            return visible, partial
+            return visible, partial, np.zeros(0, np.int64), np.zeros(0, np.int64)
         view = self._over(el)
-        status, rows, occ = view.classify(r, s, runs=not children)
+        if candidates is None:
+            status, rows, occ = view.classify(r, s, runs=not children)
+        else:
+            status, rows, occ = view.classify_listed(r, s, *candidates)
         self.n_classified += m
         visible[status == FULL] = -1.0
         part = np.flatnonzero(status == MAYBE)
@@ -142,7 +169,7 @@ class ElementVisibility:
             partial[part] = True
             self.n_traced += len(part)
         self.n_rays += view.n_rays
-        return visible, partial
+        return visible, partial, np.bincount(rows, minlength=m), occ
 
     def exact(self, el: Elements, r: np.ndarray, s: np.ndarray, order: int = 2) -> np.ndarray:
         """(m,) visible fraction by exact shadow clipping at ``order**2`` receiver points.
