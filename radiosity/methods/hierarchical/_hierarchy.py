@@ -53,11 +53,13 @@ ELEMENT_BYTES = 96 + 24 + 24 + 6 * 8 + 24 + 8 * 24
 # take twice that. Per final link, bench_growth measured 230-360 bytes on the Cornell box and
 # 360-645 on the cluster-heavy furnace spheres (645 at 100k faces, 4.9 M of its 5.0 M links
 # cluster links) and 970 in the room of 1,000 floating cubes (7.7 GB for 7.95 M links, 5.13 M
-# of them cluster links), so cluster links took 1,536. Since the small-source budget and the
-# oriented shares (2026-12-05) the same room peaks at 10.5 GB for 6.81 M links (5.07 M cluster
-# links), about 1,550 a link, so they take 2,048. The stored size (LINK_BYTES) is 94.
+# of them cluster links), so cluster links took 1,536. With the small-source budget and the
+# oriented shares (2026-12-05) the same room peaked at 10.5 GB for 6.81 M links (2,048 a cluster
+# link then); the peak was the numpy test of every (link, occluder) row for occluders behind
+# either element's plane, which the classification kernel now makes: 4.4 GB, 647 bytes a link,
+# so cluster links take 1,024. The stored size (LINK_BYTES) is 94.
 LINK_PEAK_BYTES = 200
-CLUSTER_LINK_PEAK_BYTES = 2048
+CLUSTER_LINK_PEAK_BYTES = 1024
 CHUNK_LINKS = 100_000  # links evaluated at once (bounds the temporaries of the estimates)
 # Cluster links scale their isotropic estimate by the visibility of one representative pair of
 # patches (since 2026-12-05 the two facing each other most, ClusterTree.facing_patch; the middle
