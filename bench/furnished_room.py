@@ -67,7 +67,8 @@ def box(lo, hi) -> trimesh.Trimesh:
 
 
 def room_shell(obj: ObjWriter) -> None:
-    """Six inward-facing quads; lamps are separate quads 1 cm below the ceiling, facing down."""
+    """Six inward-facing quads; lamps are 1 cm thick panels against the ceiling (closed boxes:
+    a lone quad's back would absorb in the furnace, where every surface must emit and reflect)."""
     x, y, z = ROOM
     quads = {
         "floor": [(0, 0, 0), (0, 0, z), (x, 0, z), (x, 0, 0)],
@@ -81,9 +82,7 @@ def room_shell(obj: ObjWriter) -> None:
         material = name if name in MATERIALS else "wall"
         obj.add(name, material, np.array(quad, float), [[0, 1, 2, 3]])
     for k, (cx, cz) in enumerate([(1.5, 1.0), (4.5, 1.0), (1.5, 3.0), (4.5, 3.0)]):
-        h = y - 0.01
-        lamp = np.array([(cx - 0.3, h, cz - 0.3), (cx + 0.3, h, cz - 0.3), (cx + 0.3, h, cz + 0.3), (cx - 0.3, h, cz + 0.3)])
-        obj.add(f"lamp{k}", "lamp", lamp, [[0, 1, 2, 3]])
+        obj.add_mesh(f"lamp{k}", "lamp", box((cx - 0.3, y - 0.01, cz - 0.3), (cx + 0.3, y, cz + 0.3)))
 
 
 def table(obj: ObjWriter, k: int, corner, rng) -> None:
@@ -109,7 +108,7 @@ def stool(obj: ObjWriter, k: int, centre, sides: int) -> None:
     vertices = np.vstack([lo, hi])
     top = list(range(2 * sides - 1, sides - 1, -1))  # seen from above: counter-clockwise
     bottom = list(range(sides))
-    sides_q = [[i, (i + 1) % sides, sides + (i + 1) % sides, sides + i] for i in range(sides)]
+    sides_q = [[i, sides + i, sides + (i + 1) % sides, (i + 1) % sides] for i in range(sides)]  # facing out
     obj.add(f"stool{k}_seat", "blue", vertices, [top, bottom] + sides_q)
     obj.add_mesh(f"stool{k}_leg", "wood", box((cx - 0.02, 0, cz - 0.02), (cx + 0.02, 0.42, cz + 0.02)))
 
