@@ -302,6 +302,23 @@ def test_fill_estimate_counts_the_facing_pairs_of_open_plates():
     assert first.seconds > 0 and "0% of" in first.describe()
 
 
+@pytest.mark.xfail(strict=True, reason="known (issue 14): at draft's element size a leaf's many links, each "
+                   "within eps, sum to errors of 15-28%: per-link BF refinement bounds no leaf's total")
+def test_furnace_box_near_a_wall_at_the_draft_element_size(tmp_path):
+    """A furnace room with a cabinet 10 cm from a wall, at draft (elements down to 1/50 of the
+    diagonal): B = E / (1 - rho) within 2% on every leaf, as the uniform fill gives (0.2%).
+    Measured 2026-12-05: -17% / +28% (mean |error| 3.5%); -3% / +3% at 1/10. Over every link,
+    the small-source budget gives +1.1% but -14.8% (links to far ceiling regions that their
+    rays call hidden) in 60x the links."""
+    path = write_obj(tmp_path / "gap.obj", {"room": axis_box([0, 0, 0], [6, 3, 4], inward=True),
+                                            "cabinet": axis_box([0.5, 0.0, 3.65], [2.0, 1.8, 3.9], inward=False)})
+    with pytest.warns(radiosity.RadiosityWarning):
+        scene = radiosity.load_scene(path).with_materials(reflectance=0.5, emission=1.0)
+    s = radiosity.solve(scene, method="hierarchical", preset="draft", min_element_rel=1 / 50, cache=False)
+    error = s.radiosity[~s.scene.patch_hidden] / 2 - 1
+    assert np.abs(error).max() < 0.02
+
+
 def test_push_pull_conserves_power_through_clusters(furnace):
     """With clusters, power gathered by elements and clusters (A H) equals the power pushed onto
     the leaves; a cluster pulls the area mean of its leaves."""
