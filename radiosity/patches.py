@@ -245,12 +245,16 @@ def subdivide_faces(vertices: np.ndarray, faces: list[np.ndarray], max_patch_siz
     quads[first[single]] = whole[single]
     for index, cells in made.items():
         quads[first[index]:first[index] + len(cells)] = cells
-    # Cells of the per-face path may have zero area; a whole face's patch is its face, whose
-    # area is far above its round-off (whole_faces), so only the former are measured.
+    # Cells of the per-face path may have no area (a fan triangle of collinear vertices that
+    # imprinting left on a cut table top: 1e-17 m^2 and no normal, a leaf the hierarchy could
+    # never light); a whole face's patch is its face, whose area is far above its round-off
+    # (whole_faces), so only the former are measured, as _face_cells measures faces.
     keep = np.ones(len(quads), bool)
     cut = ~np.repeat(single, counts)
     if cut.any():
-        keep[cut] = centroids_and_areas(quads[cut])[1] > 0
+        cells = quads[cut]
+        extent = np.ptp(cells, axis=1).max(axis=1)
+        keep[cut] = centroids_and_areas(cells)[1] > _tol.DEGENERATE_REL * 1e2 * extent ** 2
     if keep.all():
         return Patches(quads, owner), report
     return Patches(quads[keep], owner[keep]), report
