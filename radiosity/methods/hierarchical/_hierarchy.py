@@ -98,6 +98,7 @@ SETTLE_EXACT_ALWAYS = True
 NEAR_BOUND = "near"
 NEAR_SMALLER = 0.5  # ... and the source's radius is below this share of r's
 NEAR_RELATIVE = 2.0  # "near": the source's sphere comes closer to r's centroid than this many r radii
+NEAR_GAP = 0.25  # ... or, whatever its size, the source faces r closer than this many r radii
 SETTLE_LATER = True
 # Children of a partly visible link are classified against its undecided occluders (kept while
 # it may split in the same pass) instead of walking the occluders' BVH again.
@@ -649,8 +650,12 @@ def _near_bound(el: Elements, r: np.ndarray, s: np.ndarray, near_only: bool) -> 
     cos_r, cos_s = np.minimum(1.0, h_s / g), np.minimum(1.0, h_r / g)
     cone = (radius_s / np.maximum(d, radius_s)) ** 2 * np.minimum(1.0, 2.0 * cos_r)
     bound = np.minimum(cone, el.area[s] * cos_r * cos_s / (np.pi * g ** 2))
-    # a source as large as the receiver has a peak as wide as the 3x3 points' spacing: they see it
-    use = apart & el.splittable[r] & (radius_s < NEAR_SMALLER * radius_r)
+    # a source as large as the receiver has a peak as wide as the 3x3 points' spacing: they see
+    # it, unless it faces r closer than that spacing (a cabinet's back 1 cm from a wall: the
+    # points of a triangle of its back all missed the wall's element over its apex, 0.0005 for
+    # 0.028); neighbours on a curved surface face the same way, and are left to the points
+    facing = np.einsum("mc,mc->m", el.normal[r], el.normal[s]) < -0.5
+    use = apart & el.splittable[r] & ((radius_s < NEAR_SMALLER * radius_r) | (facing & (g < NEAR_GAP * radius_r)))
     if near_only:
         use &= dist - radius_s < NEAR_RELATIVE * radius_r
     return np.where(use, bound, 0.0)
