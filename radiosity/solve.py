@@ -284,7 +284,7 @@ def _auto_method(cut: Scene, options: Options) -> tuple[str, str]:
     settings = _fill_settings(options)
     visibility = Visibility(cut.patch_quads, cut.patch_normal, cut.patch_object, cut.scale,
                             samples=settings.visibility_samples, max_samples=settings.visibility_max_samples)
-    estimate = estimate_fill(cut.patch_quads, cut.patch_normal, visibility, settings, active)
+    estimate = estimate_fill(cut.patch_quads, cut.patch_normal, cut.patch_centroid, visibility, settings, active)
     if estimate.seconds <= AUTO_MAX_FILL_SECONDS:
         return "uniform", ""
     return "hierarchical", (f"method auto: hierarchical, since the uniform fill of {cut.n_patches:,} patches "

@@ -295,10 +295,11 @@ def test_fill_estimate_counts_the_facing_pairs_of_open_plates():
     cells = [(x, x + 1 / n, y, y + 1 / n) for x in np.arange(n) / n for y in np.arange(n) / n]
     quads = np.array([rect(*c, 0.0) for c in cells] + [rect(*c, 1.0, down=True) for c in cells])
     vis = make_vis(quads)
-    first = estimate_fill(quads, vis.normals, vis, FillSettings(), np.ones(len(quads), bool))
+    centroid = quads.mean(axis=1)
+    first = estimate_fill(quads, vis.normals, centroid, vis, FillSettings(), np.ones(len(quads), bool))
     assert first.partial_pairs == 0 and first.occluders_squared == 0
     assert first.facing_pairs == pytest.approx(n ** 4, rel=0.03)
-    assert first == estimate_fill(quads, vis.normals, vis, FillSettings(), np.ones(len(quads), bool))
+    assert first == estimate_fill(quads, vis.normals, centroid, vis, FillSettings(), np.ones(len(quads), bool))
     assert first.seconds > 0 and "0% of" in first.describe()
 
 

@@ -983,7 +983,6 @@ def _hull_planes(vi, vj, planes, tol):
     return n
 
 
-
 @njit(cache=True, inline="always")
 def _behind(polys, kk, point, n, tol):
     """Occluder kk has no vertex more than tol in front of the plane through ``point`` with unit
@@ -995,6 +994,15 @@ def _behind(polys, kk, point, n, tol):
         if h > tol:
             return False
     return True
+
+
+@njit(cache=True, inline="always")
+def _pair_box(vi, vj, lo, hi):
+    """The box of the vertices of two patches, into lo and hi."""
+    for c in range(3):
+        lo[c] = min(vi[:, c].min(), vj[:, c].min())
+        hi[c] = max(vi[:, c].max(), vj[:, c].max())
+
 
 @njit(cache=True, inline="always")
 def _classify_pair(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, node_hi, node_left, node_right,
@@ -1008,9 +1016,7 @@ def _classify_pair(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, nod
     occluder that lies behind the plane of either patch (unit normals ``nij[0]``, ``nij[1]``; see
     :func:`_behind`) is free without a test: the faces of a cube that touch one of its faces.
     """
-    for c in range(3):
-        lo[c] = min(vi[:, c].min(), vj[:, c].min())
-        hi[c] = max(vi[:, c].max(), vj[:, c].max())
+    _pair_box(vi, vj, lo, hi)
     n_maybe = 0
     met = 0
     n_planes = 0
@@ -1332,9 +1338,7 @@ def classify_listed(va, ia, vb, ib, na, nb, cand_starts, cand_occ, polys, normal
         planes = np.empty((MAX_HULL_PLANES, 4))
         for p in range(blk * _PAIR_BLOCK, min(m, (blk + 1) * _PAIR_BLOCK)):
             vi, vj = va[ia[p]], vb[ib[p]]
-            for c in range(3):
-                lo[c] = min(vi[:, c].min(), vj[:, c].min())
-                hi[c] = max(vi[:, c].max(), vj[:, c].max())
+            _pair_box(vi, vj, lo, hi)
             first, last = cand_starts[p], cand_starts[p + 1]
             n_planes = _hull_planes(vi, vj, planes, tol) if last - first >= HULL_AFTER else 0
             n = 0

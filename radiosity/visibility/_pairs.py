@@ -296,10 +296,7 @@ class Visibility:
         occ = self.occluders
         if occ.n_occluders == 0 or m == 0:
             return np.full(m, FREE, np.int8), np.zeros(0, np.int64), np.zeros(0, np.int64)
-        if self.cull_behind:
-            normals, behind = self.normals, PLANE_REL * self.scale
-        else:
-            normals, behind = np.zeros((1, 3)), -1.0
+        normals, behind = self._behind_arguments(self.normals if self.cull_behind else None)
         tol = PLANE_REL * self.scale
         status, out_starts, out = classify_listed(self.quads, np.ascontiguousarray(i, dtype=np.int64), self.quads,
                                                   np.ascontiguousarray(j, dtype=np.int64), normals, normals,
@@ -307,6 +304,13 @@ class Visibility:
                                                   np.ascontiguousarray(candidates, dtype=np.int64), occ.polys,
                                                   occ.normal, occ.center, occ.inward, occ.lo, occ.hi, tol, tol, behind)
         return status, np.repeat(np.arange(m), np.diff(out_starts)), out
+
+    def _behind_arguments(self, normals):
+        """(normals, behind) for the classification kernels: the patches' unit normals and the
+        tolerance of the behind-the-plane test, or a placeholder and -1 (no test) for None."""
+        if normals is None:
+            return np.zeros((1, 3)), -1.0
+        return np.ascontiguousarray(normals, dtype=np.float64), PLANE_REL * self.scale
 
     def _cull_closed(self, i, j, status, rows, occ):
         """Leave out the closed objects' faces that a partly occluded pair can do without."""
@@ -339,10 +343,7 @@ class Visibility:
         vb = np.ascontiguousarray(vb, dtype=np.float64)
         status = np.empty(m, np.int8)
         rows, occs = [], []
-        if normals is None:
-            normals, behind = np.zeros((1, 3)), -1.0
-        else:
-            normals, behind = np.ascontiguousarray(normals, dtype=np.float64), PLANE_REL * self.scale
+        normals, behind = self._behind_arguments(normals)
         for s in range(0, m, CHUNK_CLASSIFY):
             e = min(m, s + CHUNK_CLASSIFY)
             st, starts, k = classify_pairs(va, np.ascontiguousarray(ia[s:e], dtype=np.int64), vb,

@@ -361,8 +361,8 @@ class Hierarchy:
             factor, spread, peak = link_factors(self.el, rr, ss, peak=True)
             if NEAR_BOUND != "off":
                 spread = np.maximum(spread, _near_bound(self.el, rr, ss, NEAR_BOUND == "near") - (peak - spread))
-            visible, partial, count, occ = self._visibility(rr, ss, None if parents is None else
-                                                            parents[2][a:a + CHUNK_LINKS][facing], parents)
+            ours = None if parents is None else (*parents[:2], parents[2][a:a + CHUNK_LINKS][facing])
+            visible, partial, count, occ = self._visibility(rr, ss, ours)
             keep = visible >= 0.0  # FULL pairs come back as -1
             # A crossing pair is as uncertain as its largest point value (the points do not
             # resolve where the plane cuts), or as its crude bound if every point missed.
@@ -377,14 +377,14 @@ class Hierarchy:
             return Links.empty(), Undecided(np.zeros(0, np.int64), np.zeros(0, np.int64))
         return Links.concat(parts), Undecided.concat(lists)
 
-    def _visibility(self, r: np.ndarray, s: np.ndarray, parent: np.ndarray | None,
-                    parents: tuple[Links, Undecided | None, np.ndarray] | None):
+    def _visibility(self, r: np.ndarray, s: np.ndarray, parents: tuple[Links, Undecided | None, np.ndarray] | None):
         """(visible, partial, count, occluders) of pairs (see :meth:`ElementVisibility.fractions_undecided`);
+        with ``parents`` (as :meth:`_evaluate`'s, the index of each of these pairs' parent),
         children of free links are free, children of partly visible ones take their parent's
         undecided occluders as candidates."""
         if parents is None:
             return self.vis.fractions_undecided(self.el, r, s)
-        links, undecided, _ = parents
+        links, undecided, parent = parents
         m = len(r)
         visible, partial, count = np.ones(m), np.zeros(m, bool), np.zeros(m, np.int64)
         ask = links.partial[parent]

@@ -21,7 +21,7 @@ import numpy as np
 
 from ...visibility import MAYBE, Visibility
 from ...visibility._constants import AUTO_EXACT_ATOL
-from .assembly import FillSettings
+from .assembly import FillSettings, facing_pairs
 
 __all__ = ["FillEstimate", "estimate_fill"]
 
@@ -54,8 +54,9 @@ class FillEstimate:
                 f"mean squared count of possible occluders {mean_sq:.3g}")
 
 
-def estimate_fill(quads: np.ndarray, normals: np.ndarray, visibility: Visibility, settings: FillSettings,
-                  active: np.ndarray, samples: int = SAMPLE_PAIRS, seed: int = 0) -> FillEstimate:
+def estimate_fill(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, visibility: Visibility,
+                  settings: FillSettings, active: np.ndarray, samples: int = SAMPLE_PAIRS, seed: int = 0
+                  ) -> FillEstimate:
     """Estimate a uniform fill's time from the classification of ``samples`` random pairs."""
     index = np.flatnonzero(active)
     n = len(index)
@@ -63,26 +64,19 @@ def estimate_fill(quads: np.ndarray, normals: np.ndarray, visibility: Visibility
         return FillEstimate(0.0, 0.0, 0.0, 0.0, 0)
     rng = np.random.default_rng(seed)
     i, j = index[rng.integers(0, n, samples)], index[rng.integers(0, n, samples)]
-    facing = (i != j) & _in_front(quads, normals, i, j, visibility.scale) & _in_front(quads, normals, j, i,
-                                                                                       visibility.scale)
+    facing = facing_pairs(quads, normals, centroid, i, j)
     status, rows, _ = visibility.classify(i[facing], j[facing])
     count = np.bincount(rows, minlength=len(status)).astype(float)
     per_pair = n * n / 2 / samples  # each ordered pair drawn (of n^2) stands for this many unordered ones
-    facing_pairs = facing.sum() * per_pair
+    n_facing = facing.sum() * per_pair
     partial_pairs = (status == MAYBE).sum() * per_pair
     squared = (count ** 2).sum() * per_pair
     mode = "exact" if settings.visibility == "exact" or settings.visibility_rtol < AUTO_EXACT_ATOL else "rays"
     per_unit = SECONDS_PER_OCCLUDER2[mode]
     if mode == "exact":
         per_unit *= (EXACT_ATOL / max(settings.visibility_rtol, 1e-12)) ** 0.3
-    seconds = SECONDS_PER_PAIR[mode] * facing_pairs + per_unit * squared
-    return FillEstimate(float(facing_pairs), float(partial_pairs), float(squared), float(seconds), samples)
-
-
-def _in_front(quads: np.ndarray, normals: np.ndarray, i: np.ndarray, j: np.ndarray, scale: float) -> np.ndarray:
-    """Some vertex of patch j lies in front of patch i's plane (the fill's facing test)."""
-    height = np.einsum("mkc,mc->mk", quads[j] - quads[i, :1], normals[i])
-    return height.max(axis=1) > 1e-9 * scale
+    seconds = SECONDS_PER_PAIR[mode] * n_facing + per_unit * squared
+    return FillEstimate(float(n_facing), float(partial_pairs), float(squared), float(seconds), samples)
 
 
 def _duration(seconds: float) -> str:
