@@ -93,6 +93,11 @@ class Options:
     link_tolerance : float
         Hierarchical only: a link is refined while a bound on the radiosity error it makes
         exceeds this fraction of the scene's mean emitted exitance (emitted power / area).
+    leaf_tolerance : float
+        Hierarchical only: an element splits (all its links move to its children) while the
+        radiosity its links gather, summed at its receiver points, strays from its mean by more
+        than this fraction of the scene's mean emitted exitance at one of them: the error each
+        level pushes onto the leaves below, which one link at a time does not bound. 0: off.
     min_element_rel : float
         Hierarchical only: smallest element edge as a fraction of the scene's bounding-box
         diagonal (unless ``min_element_size`` is given).
@@ -117,6 +122,7 @@ class Options:
     scheduler: str | None = None
     method: str = "auto"
     link_tolerance: float = 3e-3
+    leaf_tolerance: float = 2e-2
     min_element_rel: float = 1 / 100
     min_element_size: float | None = None
 
@@ -144,9 +150,9 @@ class Options:
 PRESETS = {
     "draft": Options(patch_size_rel=1 / 12, near_order=2, far_separation=2.0, visibility_samples=2,
                      visibility="auto", visibility_max_samples=3, visibility_atol=1e-3, formfactor_rtol=1e-3,
-                     link_tolerance=1e-2, min_element_rel=1 / 50),
+                     link_tolerance=1e-2, leaf_tolerance=3e-2, min_element_rel=1 / 50),
     "default": Options(),
     "fine": Options(patch_size_rel=1 / 35, near_order=4, far_separation=4.0, visibility_samples=3,
                     visibility_max_samples=5, visibility_atol=1e-5, formfactor_rtol=1e-6,
-                    link_tolerance=1e-3, min_element_rel=1 / 200),
+                    link_tolerance=1e-3, leaf_tolerance=1e-2, min_element_rel=1 / 200),
 }

@@ -46,6 +46,10 @@ def add_args(parser) -> None:
     parser.add_argument("--link-tolerance", type=positive_fraction, default=None, metavar="TOL",
                         help="hierarchical: refine a link while its radiosity error bound exceeds TOL times the "
                              "scene's mean emitted exitance (default: the preset's)")
+    parser.add_argument("--leaf-tolerance", type=fraction_or_zero, default=None, metavar="TOL",
+                        help="hierarchical: split an element while what its links together push onto the leaves "
+                             "below strays past TOL times the scene's mean emitted exitance; 0: off (default: the "
+                             "preset's)")
     parser.add_argument("--min-element-size", type=positive_metres, default=None, metavar="METRES",
                         help="hierarchical: smallest element edge (default: the preset's share of the scene size)")
     parser.add_argument("--no-picture", action="store_true", help="skip the PNG")
@@ -65,6 +69,16 @@ def add_args(parser) -> None:
                              "(0: every shadow exact; default: %(default)g)")
 
 
+def fraction_or_zero(text: str) -> float:
+    """argparse type of ``--leaf-tolerance``: a finite number >= 0 (0: off)."""
+    try:
+        if float(text) == 0.0:
+            return 0.0
+    except ValueError:
+        pass
+    return positive_fraction(text)
+
+
 def positive_fraction(text: str) -> float:
     """argparse type of ``--link-tolerance``: a finite number > 0."""
     try:
@@ -81,6 +95,8 @@ def _method_options(args) -> dict:
     out = {"method": args.method}
     if args.link_tolerance is not None:
         out["link_tolerance"] = args.link_tolerance
+    if args.leaf_tolerance is not None:
+        out["leaf_tolerance"] = args.leaf_tolerance
     if args.min_element_size is not None:
         out["min_element_size"] = args.min_element_size
     return out

@@ -41,9 +41,12 @@ def min_element_size(scene: Scene, options: Options) -> float:
     return float(size)
 
 
-def _check_tolerance(tolerance: float) -> None:
+def _check_tolerances(options: Options) -> None:
+    tolerance, leaf = options.link_tolerance, options.leaf_tolerance
     if not (np.isfinite(tolerance) and tolerance > 0):
         raise ValueError(f"link_tolerance must be a positive fraction of the mean emitted exitance, got {tolerance!r}")
+    if not (np.isfinite(leaf) and leaf >= 0):
+        raise ValueError(f"leaf_tolerance must be a fraction of the mean emitted exitance, 0 or more, got {leaf!r}")
 
 
 def _roots(scene: Scene, options: Options) -> Scene:
@@ -65,12 +68,13 @@ def build_hierarchy(scene: Scene, options: Options, *, clusters: bool | None = N
     ``clusters``: start from a volume hierarchy over the input patches (None: when there are
     many of them, see :data:`._clusters.CLUSTER_MIN_ROOTS`).
     """
-    _check_tolerance(options.link_tolerance)
+    _check_tolerances(options)
     size = min_element_size(scene, options)
     visibility = Visibility(scene.patch_quads, scene.patch_normal, scene.patch_object, scene.scale,
                             samples=options.visibility_samples, max_samples=options.visibility_max_samples)
     return Hierarchy(scene.patch_quads, scene.patch_normal, scene.reflectance, scene.emission, ~_inactive(scene),
                      visibility, min_size=size, tolerance=options.link_tolerance,
+                     leaf_tolerance=options.leaf_tolerance,
                      formfactor_rtol=options.formfactor_rtol, exact=options.visibility != "rays",
                      clusters=clusters)
 
@@ -133,8 +137,18 @@ def _progress(enabled: bool):
 
 
 def _alternate(hier: Hierarchy, options: Options, timings: dict, bar):
-    """Refine and solve in turn until a pass splits no link (at most MAX_ROUNDS passes)."""
+    """Refine and solve in turn until a pass splits no link (at most MAX_ROUNDS passes).
+
+    The solves that steer refinement scale leaf rows of K past 1 down to 1 (no point sees more
+    than its hemisphere). After the first pass only the emitters' links are refined, and the
+    coarse cluster links between unlit clusters summed to rows of up to 14 in a furnished room
+    (2,076 faces): its solve doubled the light and the next pass split 5.4 M links instead of
+    1.4 M. The answer is solved once more without the scaling, which, cutting only the rows
+    above 1 of push errors that cancel on average, darkens a surface (the bundled box's ceiling
+    at draft: 1.3% -> 2.8% off).
+    """
     refine_s = solve_s = 0.0
+    clamped = False
     for round_ in range(MAX_ROUNDS):
         if bar is not None:
             bar.set_postfix_str(f"pass {round_ + 1}")
@@ -145,6 +159,11 @@ def _alternate(hier: Hierarchy, options: Options, timings: dict, bar):
         if split == 0 and round_ > 0:
             hier.stats.converged = True
             break
+        t = time.perf_counter()
+        B, K, leaves, report = hier.solve(options.solver_rtol, clamp=True)
+        clamped = K.row_scale is not None
+        solve_s += time.perf_counter() - t
+    if clamped:
         t = time.perf_counter()
         B, K, leaves, report = hier.solve(options.solver_rtol)
         solve_s += time.perf_counter() - t

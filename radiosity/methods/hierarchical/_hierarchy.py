@@ -17,6 +17,12 @@ exceed ``eps`` with both ends at the minimum size stay, with their factor recomp
 uniform fill's adaptive quadrature and, if partly visible, their visibility by exact shadow
 clipping.
 
+Each link meeting eps alone does not bound what a receiver's links push onto its leaves
+together (a corner element sees less of every far region than its mean): after each pass, an
+element whose links' point deviations, summed with their weights, exceed ``leaf_tolerance *
+B_ref`` at one of its Gauss points moves all its links to its children
+(:meth:`Hierarchy._varying_receivers`).
+
 The bound is per unit area on purpose: a bound on the power itself (times ``A_r``) lets small
 receivers keep links whose factor is wrong by 100% (their power is small), and a closed box
 where every surface emits then misses ``B = E / (1 - rho)`` by 10% on its small elements.
@@ -38,13 +44,13 @@ from ... import _memory
 from ...visibility import Visibility
 from ._clusters import CLUSTER_MIN_ROOTS, ClusterTree, chunks
 from ._elements import Elements
-from ._links import ElementVisibility, adaptive_factors, link_factors
+from ._links import RECEIVER_ORDER, ElementVisibility, adaptive_factors, link_factors
 
 __all__ = ["Hierarchy", "LinkOperator", "Links", "HierarchyStats"]
 
-# Bytes per stored link (ends, factor, spread, visibility, flags, G's CSR entry) and per element
+# Bytes per stored link (ends, factor, spread, visibility, flags, point deviations, G's CSR entry) and per element
 # (geometry, tree, radiosity, P and R entries of a few levels): the memory estimate's rates.
-LINK_BYTES = 8 + 8 + 8 + 8 + 8 + 2 + 12 + 40
+LINK_BYTES = 8 + 8 + 8 + 8 + 8 + 2 + 9 + 4 + 12 + 40
 ELEMENT_BYTES = 96 + 24 + 24 + 6 * 8 + 24 + 8 * 24
 # What a link costs at the peak of a solve, with the refinement's batches (and, for cluster
 # links, the estimates' node pairs), per link the check counts (the kept links and the new
@@ -57,7 +63,7 @@ ELEMENT_BYTES = 96 + 24 + 24 + 6 * 8 + 24 + 8 * 24
 # oriented shares (2026-12-05) the same room peaked at 10.5 GB for 6.81 M links (2,048 a cluster
 # link then); the peak was the numpy test of every (link, occluder) row for occluders behind
 # either element's plane, which the classification kernel now makes: 4.4 GB, 647 bytes a link,
-# so cluster links take 1,024. The stored size (LINK_BYTES) is 94.
+# so cluster links take 1,024. The stored size (LINK_BYTES) is 107 (94 before the point deviations).
 LINK_PEAK_BYTES = 200
 CLUSTER_LINK_PEAK_BYTES = 1024
 CHUNK_LINKS = 100_000  # links evaluated at once (bounds the temporaries of the estimates)
@@ -119,13 +125,19 @@ class Links:
     doubt: np.ndarray
     partial: np.ndarray
     settled: np.ndarray
+    # the point values over r's Gauss points less their mean, as int8 codes of ``shape_scale``
+    # (the largest |deviation|) / 127: what the receiver's variation test sums (9 bytes a link)
+    shape: np.ndarray
+    shape_scale: np.ndarray
 
     @classmethod
     def empty(cls) -> "Links":
         z = np.zeros(0)
         i = np.zeros(0, np.int64)
         b = np.zeros(0, bool)
-        return cls(i, i.copy(), z, z.copy(), z.copy(), z.copy(), b, b.copy())
+        q = RECEIVER_ORDER ** 2
+        return cls(i, i.copy(), z, z.copy(), z.copy(), z.copy(), b, b.copy(), np.zeros((0, q), np.int8),
+                   np.zeros(0, np.float32))
 
     def __len__(self) -> int:
         return len(self.r)
@@ -168,24 +180,33 @@ class LinkOperator(spla.LinearOperator):
 
     ``K @ B`` is the irradiance each leaf receives; ``K.T @ A`` is, per leaf, the area of
     fronts its light reaches (as for a view-factor matrix). ``nnz`` counts the links.
+    ``row_scale`` (optional, (n_leaves,)) scales each leaf's row: the rows of P G R that sum
+    past 1 are brought down to 1 (:meth:`Hierarchy.operator`).
     """
 
-    def __init__(self, push: sp.csr_matrix, gather: sp.csr_matrix, pull: sp.csr_matrix, links: int | None = None):
+    def __init__(self, push: sp.csr_matrix, gather: sp.csr_matrix, pull: sp.csr_matrix, links: int | None = None,
+                 row_scale: np.ndarray | None = None):
         self.push, self.gather, self.pull = push, gather, pull
         self.nnz = int(gather.nnz if links is None else links)  # G drops links hidden by their rays
+        self.row_scale = row_scale
         super().__init__(dtype=np.float64, shape=(push.shape[0], pull.shape[1]))
 
+    def _scaled(self, y):
+        if self.row_scale is None:
+            return y
+        return self.row_scale * y if y.ndim == 1 else self.row_scale[:, None] * y
+
     def _matvec(self, x):
-        return self.push @ (self.gather @ (self.pull @ x))
+        return self._scaled(self.push @ (self.gather @ (self.pull @ x)))
 
     def _matmat(self, x):
-        return self.push @ (self.gather @ (self.pull @ x))
+        return self._scaled(self.push @ (self.gather @ (self.pull @ x)))
 
     def _rmatvec(self, y):
-        return self.pull.T @ (self.gather.T @ (self.push.T @ y))
+        return self.pull.T @ (self.gather.T @ (self.push.T @ self._scaled(y)))
 
     def _rmatmat(self, y):
-        return self.pull.T @ (self.gather.T @ (self.push.T @ y))
+        return self.pull.T @ (self.gather.T @ (self.push.T @ self._scaled(y)))
 
 
 @dataclass
@@ -222,6 +243,8 @@ class HierarchyStats:
     split_per_round: list = field(default_factory=list)
     n_rays: int = 0
     seconds_refine: float = 0.0
+    rows_over_one: int = 0  # leaf rows of K summing past 1 in the last solve
+    max_row_sum: float = 0.0  # the largest row sum of K in the last solve
     seconds_solve: float = 0.0
 
     # the fields the uniform method's fill stats share (Solution.summary reads them)
@@ -237,7 +260,8 @@ class HierarchyStats:
         keys = ("rounds", "converged", "links", "partly_visible_links", "links_evaluated", "pairs_traced",
                 "exact_links", "elements", "leaves", "max_level", "roots", "initial_links", "clusters", "cluster_links",
                 "min_element_size",
-                "eps", "memory_bytes", "split_per_round")
+                "eps", "memory_bytes", "split_per_round", "rows_over_one",
+                "max_row_sum")
         return {k: getattr(self, k) for k in keys}
 
 
@@ -258,6 +282,9 @@ class Hierarchy:
         Minimum element size, metres.
     tolerance : float
         Link error bound (W/m^2) as a fraction of the mean emitted exitance (largest channel).
+    leaf_tolerance : float
+        Bound on what an element's links together push onto the leaves below it, in the same
+        units (:meth:`Hierarchy._varying_receivers`); 0: none.
     formfactor_rtol : float
         Accuracy of the adaptive factors of links at the minimum size.
     exact : bool
@@ -268,7 +295,7 @@ class Hierarchy:
     """
 
     def __init__(self, quads, normals, reflectance, emission, active, visibility: Visibility, *, min_size: float,
-                 tolerance: float, formfactor_rtol: float = 1e-4, exact: bool = True,
+                 tolerance: float, leaf_tolerance: float = 0.0, formfactor_rtol: float = 1e-4, exact: bool = True,
                  clusters: bool | None = None):
         self.el = Elements(quads, normals, min_size)
         self.rho = np.asarray(reflectance, float)
@@ -281,6 +308,7 @@ class Hierarchy:
         power = (area[:, None] * self.emission[self.active]).sum(axis=0).max() if self.active.any() else 0.0
         self.reference = power / area.sum() if power > 0 else 0.0
         self.eps = tolerance * self.reference if power > 0 else np.inf
+        self.leaf_eps = leaf_tolerance * self.reference if power > 0 and leaf_tolerance > 0 else np.inf
         self.B = self.emission.copy()  # per element; children start with their parent's value
         self.links = Links.empty()
         self.stats = HierarchyStats(roots=len(quads), min_element_size=float(min_size), eps=float(self.eps))
@@ -358,7 +386,7 @@ class Hierarchy:
             self.progress(len(rr))
             facing, crossing = _facing(self.el, rr, ss)
             rr, ss, crossing = rr[facing], ss[facing], crossing[facing]
-            factor, spread, peak = link_factors(self.el, rr, ss, peak=True)
+            factor, spread, peak, deviation = link_factors(self.el, rr, ss, shape=True)
             if NEAR_BOUND != "off":
                 spread = np.maximum(spread, _near_bound(self.el, rr, ss, NEAR_BOUND == "near") - (peak - spread))
             ours = None if parents is None else (*parents[:2], parents[2][a:a + CHUNK_LINKS][facing])
@@ -370,8 +398,9 @@ class Hierarchy:
             doubt = factor * _visibility_doubt(visible, partial, self.vis.patches.samples) + unseen * crossing
             keep &= (factor > 0) | crossing
             n = int(keep.sum())
+            codes, scale = _shape_codes(deviation[keep])
             parts.append(Links(rr[keep], ss[keep], factor[keep], spread[keep], np.clip(visible[keep], 0, 1),
-                               doubt[keep], partial[keep], np.zeros(n, bool)))
+                               doubt[keep], partial[keep], np.zeros(n, bool), codes, scale))
             lists.append(Undecided(count, occ).take(keep))
         if not parts:
             return Links.empty(), Undecided(np.zeros(0, np.int64), np.zeros(0, np.int64))
@@ -393,12 +422,12 @@ class Hierarchy:
             self.el, r[ask], s[ask], children=True, candidates=candidates)
         return visible, partial, count, occ
 
-    def _expand(self, links: Links) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _expand(self, links: Links, receiver: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The child links replacing ``links`` (the larger end, if it can split, is split four
-        ways), and the index of each child's parent in ``links``."""
+        ways; with ``receiver``, the receiver), and the index of each child's parent in ``links``."""
         el = self.el
         can = el.splittable
-        split_r = can[links.r] & ((el.area[links.r] >= el.area[links.s]) | ~can[links.s])
+        split_r = can[links.r] & ((el.area[links.r] >= el.area[links.s]) | ~can[links.s] | receiver)
         n_before = len(el)
         first_r = el.split(links.r[split_r])
         first_s = el.split(links.s[~split_r])
@@ -417,6 +446,7 @@ class Hierarchy:
         links.factor = adaptive_factors(self.el, links.r, links.s, self.formfactor_rtol)
         links.spread = np.zeros(len(links))
         links.doubt = np.zeros(len(links))
+        links.shape_scale = np.zeros(len(links), np.float32)
         if (self.exact or SETTLE_EXACT_ALWAYS) and links.partial.any():
             p = np.flatnonzero(links.partial)
             links.visible[p] = self.vis.exact(self.el, links.r[p], links.s[p], order=SETTLE_ORDER)
@@ -508,7 +538,30 @@ class Hierarchy:
                 r, s, n_cluster_split = self._refine_clusters(self.cluster_r, self.cluster_s)
                 more, more_undecided = self._evaluate(r, s)
                 work, undecided = Links.concat([work, more]), Undecided.concat([undecided, more_undecided])
-        n_split = n_first + n_cluster_split
+        n_split = n_first + n_cluster_split + self._descend(work, undecided, kept)
+        links = Links.concat(kept)
+        while np.isfinite(self.leaf_eps):
+            # receivers whose gathered radiosity varies across them past leaf_eps, though each
+            # of their links meets eps alone: all their links move down to the receiver's children
+            moved = self._varying_receivers(links)
+            if not moved.any():
+                break
+            todo = links.take(moved)
+            kept = [links.take(~moved)]
+            n_split += len(todo)
+            r, s, parent = self._expand(todo, receiver=True)
+            self._check_memory(len(r) + len(kept[0]))
+            work, undecided = self._evaluate(r, s, (todo, None, parent))
+            n_split += self._descend(work, undecided, kept)
+            links = Links.concat(kept)
+        self.links = links
+        self.stats.split_per_round.append(n_split)
+        return n_split
+
+    def _descend(self, work: Links, undecided: Undecided, kept: list) -> int:
+        """Split the links of ``work`` over eps until every link meets it or is settled; the
+        links that stay go to ``kept``. Returns how many were split."""
+        n_split = 0
         while len(work):
             over = self._over(work)
             can = self.el.splittable
@@ -523,13 +576,39 @@ class Hierarchy:
             r, s, parent = self._expand(todo)
             self._check_memory(len(r) + sum(len(k) for k in kept))
             work, undecided = self._evaluate(r, s, (todo, todo_undecided, parent))
-        self.links = Links.concat(kept)
-        self.stats.split_per_round.append(n_split)
         return n_split
 
+    def _varying_receivers(self, links: Links) -> np.ndarray:
+        """(m,) links whose receiver can split and whose gathered radiosity, summed over its
+        links at its Gauss points, strays from its mean by more than ``leaf_eps`` at one of them.
+
+        Each link's spread meets eps alone, but a receiver's links can all lean the same way: a
+        floor element in a room's corner sees less of every far wall region than its mean, and
+        its corner leaf gathered 1.15 of its row in a furnace (issue 14); the bundled box's
+        floor elements see more of every element of the lamp on one side. The leaves below get
+        the mean, so that sum is the error this level pushes onto them. Signed sums keep the
+        leanings that cancel (more of the near walls, less of the far ones) from refining.
+        """
+        can = self.el.splittable[links.r]
+        if not can.any():
+            return can
+        idx = np.flatnonzero(can & (links.shape_scale > 0))
+        if not len(idx):
+            return np.zeros(len(links), bool)
+        r, s = links.r[idx], links.s[idx]
+        weight = (self.rho[self.el.root[r]] * self.B[s]).max(axis=1) * links.visible[idx] * links.shape_scale[idx] / 127
+        receivers, row = np.unique(r, return_inverse=True)
+        total = np.zeros((len(receivers), links.shape.shape[1]))
+        for k in range(total.shape[1]):
+            total[:, k] = np.bincount(row, weights=weight * links.shape[idx, k], minlength=len(receivers))
+        varying = np.zeros(len(self.el), bool)
+        varying[receivers[np.abs(total).max(axis=1) > self.leaf_eps]] = True
+        return can & varying[links.r]
+
     # ------------------------------------------------------------------ solve
-    def operator(self) -> tuple[LinkOperator, np.ndarray]:
-        """(K, leaves): the leaf operator K = P G R and the leaf elements it acts on."""
+    def operator(self, clamp: bool = False) -> tuple[LinkOperator, np.ndarray]:
+        """(K, leaves): the leaf operator K = P G R and the leaf elements it acts on; with
+        ``clamp``, leaf rows summing past 1 are scaled down to 1."""
         el = self.el
         leaves = el.leaves()
         rows, elements = el.ancestry(leaves)
@@ -538,10 +617,18 @@ class Hierarchy:
         share = el.area[leaves][rows] / np.where(el.area[elements] > 0, el.area[elements], 1.0)
         pull = sp.csr_matrix((share, (elements, rows)), shape=(ne, nl))
         gather = sp.csr_matrix((self.links.factor * self.links.visible, (self.links.r, self.links.s)), shape=(ne, ne))
-        if self.tree is None:
-            return LinkOperator(push, gather, pull, len(self.links)), leaves
-        push, gather, pull = self._with_clusters(push, gather, pull, leaves)
-        return LinkOperator(push, gather, pull, len(self.links) + len(self.cluster_r)), leaves
+        links = len(self.links)
+        if self.tree is not None:
+            push, gather, pull = self._with_clusters(push, gather, pull, leaves)
+            links += len(self.cluster_r)
+        K = LinkOperator(push, gather, pull, links)
+        total = K @ np.ones(nl)
+        over = total > 1.0
+        self.stats.rows_over_one = int(over.sum())
+        self.stats.max_row_sum = float(total.max(initial=0.0))
+        if clamp and over.any():
+            K.row_scale = np.where(over, 1.0 / np.where(over, total, 1.0), 1.0)
+        return K, leaves
 
     def _with_clusters(self, push, gather, pull, leaves):
         """P, G, R extended by the cluster nodes (columns/rows after the elements).
@@ -573,9 +660,13 @@ class Hierarchy:
         gather = sp.block_diag([gather, sp.csr_matrix((len(tree.internal), len(tree.internal)))], format="csr") + links
         return sp.hstack([push, push_c], format="csr"), gather, sp.vstack([pull, pull_c], format="csr")
 
-    def solve(self, rtol: float) -> tuple[np.ndarray, LinkOperator, np.ndarray, SolveReport]:
-        """Leaf radiosities (l, 3) of B = E + rho K B; element radiosities are pulled from them."""
-        K, leaves = self.operator()
+    def solve(self, rtol: float, clamp: bool = False) -> tuple[np.ndarray, LinkOperator, np.ndarray, SolveReport]:
+        """Leaf radiosities (l, 3) of B = E + rho K B; element radiosities are pulled from them.
+
+        ``clamp``: scale leaf rows of K past 1 down to 1 (for the solves that steer refinement;
+        see :func:`radiosity.methods.hierarchical._alternate`).
+        """
+        K, leaves = self.operator(clamp)
         root = self.el.root[leaves]
         rho, emission = self.rho[root], self.emission[root]
         B = self.B[leaves].copy()
@@ -602,6 +693,14 @@ def _past_budget(r: np.ndarray, err: np.ndarray, budget: float) -> np.ndarray:
     out = np.zeros(len(r), bool)
     out[order] = total - before > budget
     return out
+
+
+def _shape_codes(deviation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(codes, scale): int8 codes of each row of ``deviation`` in units of its largest |value| / 127."""
+    scale = np.abs(deviation).max(axis=1)
+    safe = np.where(scale > 0, scale, 1.0)
+    codes = np.rint(deviation / safe[:, None] * 127.0).astype(np.int8)
+    return codes, scale.astype(np.float32)
 
 
 def _facing(el: Elements, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
