@@ -362,6 +362,26 @@ def test_leaf_tolerance_bounds_what_the_levels_push_onto_the_leaves(tmp_path):
     assert on < 0.01
 
 
+def test_a_small_source_touching_a_long_receiver_bounds_its_spread():
+    """A 6 m x 1 cm floor strip at the foot of a wall (imprinting leaves such strips between a
+    shelf and the wall): its 3x3 points are metres from a 0.2 m wall element at one end, yet the
+    strip's end sees half of it. The strips of the generated furnished room got 0.006 of the
+    wall for 0.5 (-30%). Touching small sources now bound the spread by 1, so r splits."""
+    from radiosity.methods.hierarchical._hierarchy import TOUCHING_BOUND, _near_bound
+    from radiosity.methods.hierarchical._links import link_factors
+
+    strip = [[0, 0, 4.0], [0, 0, 3.99], [6, 0, 3.99], [6, 0, 4.0]]
+    wall = [[5.8, 0, 4.0], [5.8, 0.2, 4.0], [6.0, 0.2, 4.0], [6.0, 0, 4.0]]
+    apart = [[5.8, 0.5, 4.0], [5.8, 0.7, 4.0], [6.0, 0.7, 4.0], [6.0, 0.5, 4.0]]
+    el = Elements(np.array([strip, wall, apart], float), np.array([[0, 1.0, 0], [0, 0, -1.0], [0, 0, -1.0]]), 0.05)
+    r, s = np.array([0, 0]), np.array([1, 2])
+    factor, spread = link_factors(el, r, s)
+    assert spread[0] < 0.05  # the points do not see what the strip's end sees
+    bound = _near_bound(el, r, s, near_only=True)
+    assert bound[0] == TOUCHING_BOUND == 1.0
+    assert bound[1] < 1.0  # not touching: the sphere bound as before
+
+
 def test_push_pull_conserves_power_through_clusters(furnace):
     """With clusters, power gathered by elements and clusters (A H) equals the power pushed onto
     the leaves; a cluster pulls the area mean of its leaves."""
