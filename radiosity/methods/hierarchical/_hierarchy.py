@@ -725,10 +725,12 @@ def _near_bound(el: Elements, r: np.ndarray, s: np.ndarray, near_only: bool) -> 
     ``asin(R_s / d)``, whose projected solid angle is at most ``(R_s / d)^2``; every direction
     to s rises at most ``H_s / g`` above r's plane (``H_s``: the height of s's highest vertex
     over it), so its cosine is at most that, and the cone's plain solid angle is at most
-    ``2 pi (R_s / d)^2``. Likewise ``F <= A_s cos_r cos_s / (pi g^2)``. The bound is 0 (unused)
-    where the spheres meet (touching neighbours: the 3x3 points' range and the crossing test
-    stay in charge) and where r cannot split (a leaf's mean is what it stores, so its links
-    make no push error); ``near_only``: only where s comes within ``NEAR_RELATIVE`` radii of r.
+    ``2 pi (R_s / d)^2``. Likewise ``F <= A_s cos_r cos_s / (pi g^2)``. Where the elements are
+    not apart (touching neighbours), the bound is ``TOUCHING_BOUND`` for a source under
+    ``NEAR_SMALLER`` of r's radius and 0 (unused: the 3x3 points' range and the crossing test
+    stay in charge) for a larger one. It is 0 where r cannot split (a leaf's mean is what it
+    stores, so its links make no push error); ``near_only``: only where s comes within
+    ``NEAR_RELATIVE`` radii of r.
 
     The receiver's 3x3 points miss the peak of a source closer to r than r's size (a small
     cube 10 cm from a 1 m wall: the wall's links saw 0.0012 where its leaf nearest the cube
@@ -762,7 +764,7 @@ def _near_bound(el: Elements, r: np.ndarray, s: np.ndarray, near_only: bool) -> 
     # a small source touching r (a wall element at the foot of a long floor strip) is seen from
     # r's points next to it at up to a half, and the 3x3 points may all be far from it: the
     # strips of a 1 cm gap between a shelf and a wall got 0.006 of the wall for 0.5, -30%
-    touching = ~apart & el.splittable[r] & small & (dist < radius_r + radius_s)
+    touching = ~apart & el.splittable[r] & small
     return np.where(use, bound, np.where(touching, TOUCHING_BOUND, 0.0))
 
 

@@ -30,8 +30,8 @@ CULL_BEHIND = True  # leave out occluders behind either end's plane (ElementVisi
 MAX_EXACT_OCCLUDERS = 10  # visibility.MAX_UNION: more possible occluders a pair trace rays (ElementVisibility.exact)
 
 
-def link_factors(el: Elements, r: np.ndarray, s: np.ndarray, order: int = RECEIVER_ORDER, *, peak: bool = False,
-                 shape: bool = False) -> tuple[np.ndarray, ...]:
+def link_factors(el: Elements, r: np.ndarray, s: np.ndarray, order: int = RECEIVER_ORDER, *, shape: bool = False
+                 ) -> tuple[np.ndarray, ...]:
     """Mean and spread of the point-to-polygon factor over receiver points of each link.
 
     Parameters
@@ -49,15 +49,14 @@ def link_factors(el: Elements, r: np.ndarray, s: np.ndarray, order: int = RECEIV
     spread : (m,) float
         Largest minus smallest point value.
     top : (m,) float
-        With ``peak=True`` (or ``shape=True``): the largest point value.
+        With ``shape=True``: the largest point value.
     deviation : (m, order**2) float
         With ``shape=True``: each point value less the mean.
     """
     m = len(r)
     if m == 0:
-        if shape:
-            return np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((0, order * order))
-        return (np.zeros(0),) * (3 if peak else 2)
+        empty = np.zeros(0)
+        return (empty, empty, empty, np.zeros((0, order * order))) if shape else (empty, empty)
     points, weights = patch_points(el.quads[r], order)
     q = points.shape[1]
     flat = points.reshape(-1, 3)
@@ -70,9 +69,8 @@ def link_factors(el: Elements, r: np.ndarray, s: np.ndarray, order: int = RECEIV
     total = weights.sum(axis=1)
     mean = (values * weights).sum(axis=1) / np.where(total > 0, total, 1.0)
     top = values.max(axis=1)
-    if shape:
-        return mean, top - values.min(axis=1), top, values - mean[:, None]
-    return (mean, top - values.min(axis=1), top) if peak else (mean, top - values.min(axis=1))
+    spread = top - values.min(axis=1)
+    return (mean, spread, top, values - mean[:, None]) if shape else (mean, spread)
 
 
 def adaptive_factors(el: Elements, r: np.ndarray, s: np.ndarray, rtol: float) -> np.ndarray:
