@@ -113,6 +113,8 @@ SHADOW_ATOL_SHARE = 0.1
 # 2.5e-6 -> 1.3e-6 off, 77 s -> 117 s.
 SHADOW_ATOL_SHARE_TIGHT = 0.01
 SHADOW_CELL_ORDER = 2
+# ... down to at most this many levels (1/64 of a side)
+SHADOW_MAX_DEPTH = 6
 # ... starting from about square cells, at most this many along an elongated patch's length
 # (``Visibility._root_cells``).
 MAX_ROOT_CELLS = 16
@@ -126,7 +128,15 @@ SATURATED_REL = 1e-9
 # to 3.2-4.4e-6 at 5 (a penumbra on a wall passing between the points of adjacent walls' squares;
 # F(wall -> wall) 1.6e-5 high). The prisms gain nothing past 3 (15 s -> 36 s at 5). In the
 # Cornell box's default fill (all levels) it cost over 10 minutes and 10 GB instead of seconds.
-SHADOW_PENUMBRA_DEPTH = 5
+SHADOW_PENUMBRA_DEPTH = 6
+# ... and there the squares may split one level further than SHADOW_MAX_DEPTH (1/128 of a side:
+# 8 mm on a 1 m wall). A closed room of 8 floating cubes, one patch a face, has 26-40 cube faces
+# behind each wall-to-wall pair (more than the cells take), whose kinks (where a shadow starts,
+# ends or overlaps another) lie 1-2 cm apart: with tests to 5 levels and squares to 6,
+# F(wall -> wall) erred by up to 2.9e-6 (worst row 2.8e-6 from 1); squares to 7, 8.1e-7 (rows
+# 1.9e-6); tests to 6 and squares to 7, 3.6e-7 (rows 3.7e-7), in 2.5x the time (17.4 -> 42.8 s).
+# The office of tests/helpers.office_scene: rows 1.1e-6 -> 8.4e-7 from 1.
+SHADOW_TIGHT_MAX_DEPTH = 7
 # ... where, too, a cell is split when the hidden factor at one of its corners misses the
 # polynomial through its children's points by more than its tolerance over this share of its
 # area: a kink between the outermost points and the cell's side lies in a band about 0.1 of the

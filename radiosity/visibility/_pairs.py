@@ -36,7 +36,7 @@ from ..formfactors import gauss_legendre_01, patch_points, square_cell_corners, 
 from . import _occluders
 from ._constants import (CELL_FALLBACK_ATOL, CELL_RETRY_POINTS, CHUNK_CELL_PAIRS, CHUNK_CLASSIFY, CHUNK_SHADOWS,
                          KINK_BAND, MAX_ROOT_CELLS, MAX_UNION, MAX_UNION_CELLS, PLANE_REL,
-                         RAY_TFAR_SHORT, RECEIVE_SMALLER_WIDTHS, SATURATED_REL, WEIGHT_FLOOR_REL)
+                         RAY_TFAR_SHORT, RECEIVE_SMALLER_WIDTHS, SATURATED_REL, SHADOW_MAX_DEPTH, WEIGHT_FLOOR_REL)
 from ._exact import hidden_factors, point_factors
 from ._occluders import FREE, FULL, MAYBE, build_occluders
 
@@ -475,7 +475,7 @@ class Visibility:
 
     def adaptive_hidden(self, i: np.ndarray, j: np.ndarray, rows: np.ndarray, occ: np.ndarray,
                         atol: float | np.ndarray,
-                        order: int = 2, max_depth: int = 6, penumbra_depth: int = 0) -> np.ndarray:
+                        order: int = 2, max_depth: int = SHADOW_MAX_DEPTH, penumbra_depth: int = 0) -> np.ndarray:
         """(m,) hidden part of partly occluded pairs, by receiver cells refined where the shadow varies.
 
         The mean over receiver i of F(x -> part of j hidden from x), integrated on cells of i's
@@ -683,7 +683,8 @@ class Visibility:
         return unocc, np.minimum(hidden, unocc)
 
     def exact_hidden(self, i: np.ndarray, j: np.ndarray, rows: np.ndarray, occ: np.ndarray, rtol: float,
-                     unoccluded: np.ndarray, max_points: int = 4096, penumbra_depth: int = 0) -> np.ndarray:
+                     unoccluded: np.ndarray, max_points: int = 4096, penumbra_depth: int = 0,
+                     max_depth: int = SHADOW_MAX_DEPTH) -> np.ndarray:
         """(m,) hidden part of partly occluded pairs, integrated over shadow-aligned receiver cells.
 
         The mean over receiver i (its part in front of j's plane) of F(x -> part of j hidden
@@ -693,7 +694,7 @@ class Visibility:
         ``max_points`` receiver points a pair) converges. Pairs
         whose lines, cells or unions ran out fall back to :meth:`adaptive_hidden`, to ``rtol``
         times ``unoccluded`` (m,), the pairs' factors (at least ``CELL_FALLBACK_ATOL``), with
-        ``penumbra_depth``.
+        ``penumbra_depth`` and ``max_depth``.
         """
         i = np.ascontiguousarray(i, dtype=np.int64)
         j = np.ascontiguousarray(j, dtype=np.int64)
@@ -722,7 +723,7 @@ class Visibility:
             keep = local[rows] >= 0
             atol = np.maximum(float(rtol) * np.asarray(unoccluded)[bad], CELL_FALLBACK_ATOL)
             hidden[bad] = self.adaptive_hidden(i[bad], j[bad], local[rows[keep]], occ[keep], atol,
-                                               penumbra_depth=penumbra_depth)
+                                               penumbra_depth=penumbra_depth, max_depth=max_depth)
         return hidden
 
     def _cell_pairs(self, i, j, starts, occ, rtol, max_points):

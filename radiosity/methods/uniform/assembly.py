@@ -176,7 +176,8 @@ def _apply_visibility(f, quads, centroid, area, i, j, visibility, settings: Fill
     from ...visibility import FULL, MAYBE
     from ...visibility._constants import (AUTO_EXACT_ATOL, AUTO_EXACT_OCCLUDERS, MAX_CELL_OCCLUDERS,
                                           SHADOW_ATOL_SHARE, SHADOW_ATOL_SHARE_TIGHT, SHADOW_CELL_ORDER,
-                                          SHADOW_CELLS_BELOW, SHADOW_PENUMBRA_DEPTH, SHADOW_RTOL_SHARE)
+                                          SHADOW_CELLS_BELOW, SHADOW_MAX_DEPTH, SHADOW_PENUMBRA_DEPTH,
+                                          SHADOW_RTOL_SHARE, SHADOW_TIGHT_MAX_DEPTH)
 
     if visibility.cull and visibility.n_occluders == 0:  # nothing can block: every pair is free
         return
@@ -237,7 +238,7 @@ def _apply_visibility(f, quads, centroid, area, i, j, visibility, settings: Fill
             unocc = f[nz[part[sel]]]
             hidden = visibility.exact_hidden(pi[sel], pj[sel], *subset(sel),
                                              SHADOW_RTOL_SHARE * settings.formfactor_rtol, unocc,
-                                             penumbra_depth=SHADOW_PENUMBRA_DEPTH)
+                                             penumbra_depth=SHADOW_PENUMBRA_DEPTH, max_depth=SHADOW_TIGHT_MAX_DEPTH)
             frac[sel] = _seen_fraction(unocc, hidden)
             exact = exact & ~cells
         # the rest: exact shadows on receiver cells refined where the hidden factor varies, far
@@ -257,7 +258,8 @@ def _apply_visibility(f, quads, centroid, area, i, j, visibility, settings: Fill
             recv, src = np.where(flip, rj, ri), np.where(flip, ri, rj)
             target = atol * np.minimum(1.0, area[src] / np.where(area[recv] > 0, area[recv], 1.0))
             hidden = visibility.adaptive_hidden(recv, src, sub_rows, sub_occ, target, order=SHADOW_CELL_ORDER,
-                                                penumbra_depth=SHADOW_PENUMBRA_DEPTH if tight else 0)
+                                                penumbra_depth=SHADOW_PENUMBRA_DEPTH if tight else 0,
+                                                max_depth=SHADOW_TIGHT_MAX_DEPTH if tight else SHADOW_MAX_DEPTH)
             ratio = np.where(flip, area[rj] / area[ri], 1.0)  # F(i -> j) = A_j F(j -> i) / A_i
             frac[sel] = _seen_fraction(unocc, hidden * ratio)
     f[nz[part]] *= frac
