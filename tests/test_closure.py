@@ -316,9 +316,9 @@ def test_shadow_cells_out_of_points_say_so_and_the_fill_recovers():
     status, rows, occ = vis.classify(i, j)
     assert status[0] == radiosity.visibility.MAYBE
     starts = np.array([0, len(occ)])
-    _, ok = vis._cell_pairs(i, j, starts, occ, 1e-9, 4096)
+    _, ok, _ = vis._cell_pairs(i, j, starts, occ, 1e-9, 4096)
     assert not ok[0]  # the bound asked for more than 4,096 points
-    reference, ok = vis._cell_pairs(i, j, starts, occ, 1e-11, 200_000)
+    reference, ok, _ = vis._cell_pairs(i, j, starts, occ, 1e-11, 200_000)
     assert ok[0]
     unocc = polygon_to_polygon(vis.quads[0], vis.quads[1], rtol=1e-12)
     hidden = vis.exact_hidden(i, j, rows, occ, 1e-9, np.array([unocc]))
@@ -363,6 +363,44 @@ def test_a_shadow_between_the_points_of_sixth_level_squares_is_found():
     # reference: shadow cells on 32 x 32 squares where they take the square's occluders, 8 x 8 x
     # 16 points on the rest (0.164289499; 8 levels of squares: 0.164289519)
     np.testing.assert_allclose(seen, 0.1642895, atol=1e-7)  # 1.4e-8 off measured
+
+
+# The L-shaped room of View3D's examples (Pinney & Bean): 3 m high, 3 x 3 m less a 2 x 2 m corner,
+# one patch a surface, the ceiling and the floor in three pieces each.
+L_ROOM = {
+    "south": [[3, 0, 3], [3, 0, 0], [0, 0, 0], [0, 0, 3]], "east": [[3, 1, 3], [3, 1, 0], [3, 0, 0], [3, 0, 3]],
+    "inner_south": [[1, 1, 3], [1, 1, 0], [3, 1, 0], [3, 1, 3]],
+    "inner_east": [[1, 3, 3], [1, 3, 0], [1, 1, 0], [1, 1, 3]],
+    "north": [[0, 3, 3], [0, 3, 0], [1, 3, 0], [1, 3, 3]], "west": [[0, 0, 3], [0, 0, 0], [0, 3, 0], [0, 3, 3]],
+    "ceiling_corner": [[1, 0, 3], [0, 0, 3], [0, 1, 3], [1, 1, 3]],
+    "ceiling_north": [[1, 1, 3], [0, 1, 3], [0, 3, 3], [1, 3, 3]],
+    "ceiling_east": [[3, 0, 3], [1, 0, 3], [1, 1, 3], [3, 1, 3]],
+    "floor_corner": [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]],
+    "floor_north": [[0, 1, 0], [1, 1, 0], [1, 3, 0], [0, 3, 0]],
+    "floor_east": [[1, 0, 0], [3, 0, 0], [3, 1, 0], [1, 1, 0]],
+}
+
+
+def test_l_shaped_room_closes_where_an_occluders_edge_ends_on_a_patch(tmp_path):
+    """The inner corner's edge ends on the corners of the ceiling's and the floor's north
+    pieces, and their shadows turn about that point: the shadow cells, graded as deep as they go,
+    gave F(ceiling north -> east wall) 4.5e-4 low (8.5e-7, converging slowly with rtol), and the
+    rows 1.1-1.2e-6 from 1. Such pairs are now integrated on both sides (``_settle_capped``)."""
+    path = write_obj(tmp_path / "l_room.obj", {k: [np.array(v, float)] for k, v in L_ROOM.items()})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", radiosity.RadiosityWarning)  # nothing emits
+        scene = radiosity.load_scene(path)
+    F = radiosity.view_factors(scene, cache=False)
+    rows = np.asarray(F.sum(axis=1)).ravel()
+    np.testing.assert_allclose(rows, 1.0, atol=1e-6)  # 7.9e-9 measured
+    names = list(scene.objects)
+    ceiling, east = names.index("ceiling_north"), names.index("east")
+    # Gauss-Legendre over the part of the ceiling piece that sees the wall, the seen part of the
+    # wall from each point by the contour formula (order 16 to 128 agree to 13 digits)
+    np.testing.assert_allclose(F[ceiling, east], 0.0018626942380, atol=1e-9)
+    area = scene.patch_area
+    AF = F.multiply(area[:, None]).toarray()
+    np.testing.assert_allclose(AF, AF.T, atol=1e-12 * area.max())
 
 
 @given(st.lists(st.floats(-1, 1), min_size=16, max_size=16))

@@ -301,7 +301,7 @@ def _pair_hidden(rec, nr, src, sn, occ, t0, t1, opolys, onormal, ocenter, oinwar
         nd -= 1
     area = _polygon_area2(dom, nd)
     if nd < 3 or area == 0.0:
-        return 0.0, True, 0
+        return 0.0, True, 0, False
     if area < 0.0:
         for k in range(nd // 2):
             for c in range(2):
@@ -317,7 +317,7 @@ def _pair_hidden(rec, nr, src, sn, occ, t0, t1, opolys, onormal, ocenter, oinwar
     fc = sn[0] * (ox - scx) + sn[1] * (oy - scy) + sn[2] * (oz - scz)
     nd = _clip2(dom, nd, tmp, fa, fb, fc, 1e-12 * (size + abs(fc)))
     if nd < 3:
-        return 0.0, True, 0
+        return 0.0, True, 0, False
     for k in range(nd):
         dom[k, 0] = tmp[k, 0]
         dom[k, 1] = tmp[k, 1]
@@ -335,7 +335,7 @@ def _pair_hidden(rec, nr, src, sn, occ, t0, t1, opolys, onormal, ocenter, oinwar
             pocc[n_occ] = occ[t]
             n_occ += 1
     if n_occ == 0:
-        return 0.0, True, 0
+        return 0.0, True, 0, False
     n_lines = 0
     for t in range(n_occ):
         kk = pocc[t]
@@ -375,6 +375,7 @@ def _pair_hidden(rec, nr, src, sn, occ, t0, t1, opolys, onormal, ocenter, oinwar
                         n_lines = _add_line(lines, n_lines, ey * fz - ez * fy, ez * fx - ex * fz, ex * fy - ey * fx,
                                             K[v, 0], K[v, 1], K[v, 2], o, e1, e2, dom, nd, eps)
     ok = n_lines < lines.shape[0]
+    capped = False
     # 3. cut the domain into convex cells
     n_cells = 1
     ccount[0] = nd
@@ -536,6 +537,8 @@ def _pair_hidden(rec, nr, src, sn, occ, t0, t1, opolys, onormal, ocenter, oinwar
             p = _ORDERS[len(_ORDERS) - 1]
             if dep < MAX_DEPTH:  # the bound asked for a split the budget could not pay
                 ok = False
+            else:  # graded as deep as it goes and still short of the bound
+                capped = True
         while p > 1 and p * p * (n_pieces + 1) > room:
             p -= 1
             ok = False  # an order below the bound's: the caller falls back to adaptive squares
@@ -577,7 +580,7 @@ def _pair_hidden(rec, nr, src, sn, occ, t0, t1, opolys, onormal, ocenter, oinwar
                     if not good:
                         ok = False
                 hidden += wq * f_h
-    return hidden / area, ok, done
+    return hidden / area, ok, done, capped
 
 
 @njit(cache=True, inline="always")
@@ -626,7 +629,7 @@ _PAIR_BLOCK = 16
 
 @njit(cache=True)
 def _cells_block(s, e, quads, normals, i, j, starts, occ, opolys, onormal, ocenter, oinward, tol, max_union, rtol,
-                 max_points, gn, gw, hidden, ok, n_points):
+                 max_points, gn, gw, hidden, ok, n_points, capped):
     ms = opolys.shape[1]
     ns = quads.shape[1]
     work = union_scratch(ns, ms, max_union) + (
@@ -639,9 +642,9 @@ def _cells_block(s, e, quads, normals, i, j, starts, occ, opolys, onormal, ocent
     work2 = (np.empty((4, 3)), np.empty(most, np.int64), np.empty(most, np.int64), np.empty(4), np.empty(4), np.zeros(ms, np.bool_),
              np.zeros(ms, np.bool_), np.empty((4, ms)), np.empty((4, ms)))
     for p in range(s, e):
-        hidden[p], ok[p], n_points[p] = _pair_hidden(quads[i[p]], normals[i[p]], quads[j[p]], normals[j[p]], occ,
-                                                     starts[p], starts[p + 1], opolys, onormal, ocenter, oinward,
-                                                     tol, max_union, rtol, max_points, gn, gw, work, work2)
+        hidden[p], ok[p], n_points[p], capped[p] = _pair_hidden(
+            quads[i[p]], normals[i[p]], quads[j[p]], normals[j[p]], occ, starts[p], starts[p + 1], opolys, onormal,
+            ocenter, oinward, tol, max_union, rtol, max_points, gn, gw, work, work2)
 
 
 @njit(cache=True, parallel=True)
@@ -664,13 +667,18 @@ def cell_pairs(quads, normals, i, j, starts, occ, opolys, onormal, ocenter, oinw
         (the caller falls back to adaptive squares).
     points : (m,) int
         Receiver points evaluated.
+    capped : (m,) bool
+        True where a piece graded to ``MAX_DEPTH`` still missed the bound: the hidden factor is
+        not smooth there at any scale (an occluder's edge ending on the receiver, whose shadow
+        then turns about that point), and the pair may err far more than ``rtol``.
     """
     m = i.shape[0]
     hidden = np.zeros(m)
     ok = np.ones(m, np.bool_)
     n_points = np.zeros(m, np.int64)
+    capped = np.zeros(m, np.bool_)
     n_blocks = (m + _PAIR_BLOCK - 1) // _PAIR_BLOCK
     for blk in prange(n_blocks):
         _cells_block(blk * _PAIR_BLOCK, min(m, (blk + 1) * _PAIR_BLOCK), quads, normals, i, j, starts, occ, opolys,
-                     onormal, ocenter, oinward, tol, max_union, rtol, max_points, gn, gw, hidden, ok, n_points)
-    return hidden, ok, n_points
+                     onormal, ocenter, oinward, tol, max_union, rtol, max_points, gn, gw, hidden, ok, n_points, capped)
+    return hidden, ok, n_points, capped

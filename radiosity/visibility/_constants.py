@@ -155,3 +155,6 @@ CELL_FALLBACK_ATOL = 1e-10
 # budget (a floor patch crossed by a partition's foot took 54k points for 1e-11; squares, which
 # resolve the jump there at first order, left its factor to a wall 3.6e-4 low).
 CELL_RETRY_POINTS = 16
+# A pair whose cells' grading was capped (``Visibility._settle_capped``) is integrated again at
+# this times its rtol, on both sides, and the side whose results agree better is kept.
+CAPPED_RTOL_STEP = 0.01
