@@ -711,17 +711,18 @@ class Visibility:
             bad.append(s + np.flatnonzero(~ok))
             capped.append(s + np.flatnonzero(ok & cap))
         bad, capped = np.concatenate(bad), np.concatenate(capped)
-        if len(capped):
-            hidden[capped] = self._settle_capped(i[capped], j[capped], *_subset_lists(starts, occ_sorted, capped),
-                                                 rtol, max_points, hidden[capped])
         if len(bad):
             # a pair whose bound asked for more points than the budget (a floor patch crossed by
             # a partition's foot: 3.6e-4 off on squares, which resolve the jump at first order)
             # tries again with a larger one before the squares
-            retry, ok, _ = self._cell_pairs(i[bad], j[bad], *_subset_lists(starts, occ_sorted, bad), rtol,
-                                            max_points * CELL_RETRY_POINTS)
+            retry, ok, cap = self._cell_pairs(i[bad], j[bad], *_subset_lists(starts, occ_sorted, bad), rtol,
+                                              max_points * CELL_RETRY_POINTS)
             hidden[bad[ok]] = retry[ok]
+            capped = np.concatenate([capped, bad[ok & cap]])
             bad = bad[~ok]
+        if len(capped):
+            hidden[capped] = self._settle_capped(i[capped], j[capped], *_subset_lists(starts, occ_sorted, capped),
+                                                 rtol, max_points, hidden[capped])
         if len(bad):
             local = np.full(len(i), -1)
             local[bad] = np.arange(len(bad))
