@@ -514,4 +514,8 @@ def view_factors(scene: Scene, *, preset: str = "default", enforce: str = "none"
     """
     vf = compute_view_factors(scene, preset=preset, enforce=enforce, force=force, error_estimate=return_error,
                               **overrides)
+    if vf.scene.n_patches != scene.n_patches:
+        warnings.warn(f"view_factors: max_patch_size cut the scene's {scene.n_patches} patches into "
+                      f"{vf.scene.n_patches}, and F is for those, which it does not return; "
+                      "compute_view_factors returns F with its patches", RadiosityWarning, stacklevel=2)
     return (vf.F, vf.error) if return_error else vf.F

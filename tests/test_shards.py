@@ -111,7 +111,8 @@ def test_cli_out_of_core_under_a_budget_smaller_than_the_matrix(tmp_path, monkey
     assert F.shape == (240, 240) and F.n_blocks > 10
     assert F.index["pairs_per_block"] == _memory.plan_fill_block(240, budget=budget)
     monkeypatch.delenv(_memory.ENV_BUDGET)
-    whole = radiosity.view_factors(radiosity.load_scene(obj), preset="draft", max_patch_size=0.12, cache=False)
+    whole = radiosity.compute_view_factors(radiosity.load_scene(obj), preset="draft", max_patch_size=0.12,
+                                           cache=False).F
     assert (F.tocsr() != whole).nnz == 0  # what the in-memory fill gives where it fits
     assert main(args + ["--out-of-core", "--vf", str(tmp_path / "x.vf"), "-o", str(out)]) == 2
     assert "--out-of-core" in capsys.readouterr().err
