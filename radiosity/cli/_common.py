@@ -23,7 +23,8 @@ def positive_metres(text: str) -> float:
 def add_scene_args(parser: argparse.ArgumentParser, *, optional_scene: bool) -> None:
     nargs = "?" if optional_scene else None
     parser.add_argument("scene", nargs=nargs, type=Path,
-                        help="OBJ file (with its MTL)" + ("; default: the bundled Cornell box" if optional_scene else ""))
+                        help="OBJ file (with its MTL) or View3D .vs3 model"
+                        + ("; default: the bundled Cornell box" if optional_scene else ""))
     parser.add_argument("--preset", choices=("draft", "default", "fine"), default="default",
                         help="speed/accuracy trade (default: %(default)s)")
     parser.add_argument("--max-patch-size", type=positive_metres, default=None, metavar="METRES",
