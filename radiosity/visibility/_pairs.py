@@ -742,7 +742,10 @@ class Visibility:
         the end wall 4.5e-4 low (8.5e-7 absolute) at rtol 1e-8 and 3.7e-5 low at 1e-12; from the
         end wall, 1e-13 off. So each side is integrated at ``rtol`` and ``CAPPED_RTOL_STEP``
         times it, and the side whose two results agree better gives the tighter one, mirrored
-        by reciprocity from j's side (F_ij^hidden = A_j F_ji^hidden / A_i).
+        by reciprocity from j's side (F_ij^hidden = A_j F_ji^hidden / A_i). Agreement of the two
+        sides at ``rtol`` is no shortcut: both may be singular (the ceiling's east piece and the
+        floor's north piece each touch an end of that edge; at formfactor_rtol 1e-10 they agreed
+        with each other and were both 6.9e-9 off).
         """
         budget = max_points * CELL_RETRY_POINTS
         own, own_ok, _ = self._cell_pairs(i, j, starts, occ, rtol * CAPPED_RTOL_STEP, budget)
