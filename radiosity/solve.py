@@ -486,7 +486,10 @@ def view_factors(scene: Scene, *, preset: str = "default", enforce: str = "none"
     ----------
     scene : Scene
     preset : {"draft", "default", "fine"}, default: "default"
-        Quadrature and visibility accuracy.
+        Quadrature and visibility accuracy; here a preset only tightens the 1e-6 below (``"fine"``),
+        never loosens it. To trade accuracy for time on a big model, pass ``formfactor_rtol`` and
+        ``visibility_atol``: View3D's 398-surface hall, whose 31,000 pairs behind more than 16
+        possible occluders take hours at 1e-6, fills in 9 minutes at 1e-3 (rows within 3.4e-3).
     enforce : {"none", "reciprocity", "closure", "auto"}, default: "none"
         Make ``A_i F_ij = A_j F_ji`` exact by symmetrising exchange areas; ``"closure"`` also
         scales them symmetrically so rows sum to 1 (closed enclosures only). ``"auto"``: what

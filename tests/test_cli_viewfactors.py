@@ -78,3 +78,18 @@ def test_outputs_on_one_file_are_refused_before_writing(tmp_path, capsys):
     code = main(["viewfactors", str(CUBE), "-o", str(out), "--vf", str(out)])
     assert code == 2 and "same file" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_tolerance_trades_accuracy_for_time(tmp_path, capsys):
+    """--tolerance sets the fill's error per factor (formfactor_rtol and visibility_atol), for
+    models whose 1e-6 fill takes hours; out of [1e-12, 1) it is refused naming the flag."""
+    out = tmp_path / "F.npz"
+    assert main(["viewfactors", str(CUBE), "-o", str(out), "--tolerance", "1e-3", "--no-cache"]) == 0
+    saved = np.load(out)
+    assert float(saved["formfactor_rtol"]) == float(saved["visibility_rtol"]) == 1e-3  # the file says what it aimed at
+    np.testing.assert_allclose(saved["sky_factor"], 0.0, atol=1e-3)  # a closed cube
+    capsys.readouterr()
+    for bad in ("0", "1", "-1e-3", "x"):
+        assert main(["viewfactors", str(CUBE), "-o", str(tmp_path / "G.npz"), "--tolerance", bad]) == 2
+        assert "--tolerance" in capsys.readouterr().err
+    assert not (tmp_path / "G.npz").exists()
