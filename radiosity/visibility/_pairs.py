@@ -232,7 +232,7 @@ class Visibility:
         self._lo = quads.min(axis=1)
         self._hi = quads.max(axis=1)
         self._tracer = None
-        self._width = None  # sqrt(patch area), for receive_on_source
+        self._area = None  # patch areas, on first use (receive_on_source, _settle_capped)
         self.n_rays = 0
         self.n_exact_rows = 0
         self.n_closed_culled = 0  # (pair, occluder) rows left out by closed-object culling
@@ -594,8 +594,7 @@ class Visibility:
         own squares F to a face of the next box came out 0.03529 for 0.02771, 27% high; from
         that face, 0.1 m from the wall, 0.0277089.)
         """
-        if self._width is None:
-            self._width = np.sqrt(centroids_and_areas(self.quads)[1])
+        width = np.sqrt(self._areas())
         o = self.occluders
 
         def nearest(patch):
@@ -609,10 +608,10 @@ class Visibility:
             return d
 
         d_i, d_j = nearest(np.asarray(i)), nearest(np.asarray(j))
-        smoother = d_j * self._width[i] > d_i * self._width[j]
+        smoother = d_j * width[i] > d_i * width[j]
         # a large receiver sees a small source's shadows as features far smaller than itself,
         # which pass between its points unseen: the smaller patch receives
-        w_i, w_j = self._width[i], self._width[j]
+        w_i, w_j = width[i], width[j]
         lopsided = np.maximum(w_i, w_j) > RECEIVE_SMALLER_WIDTHS * np.minimum(w_i, w_j)
         return np.where(lopsided, w_j < w_i, smoother)
 
@@ -773,9 +772,9 @@ class Visibility:
 
     def _areas(self) -> np.ndarray:
         """(n,) patch areas."""
-        if self._width is None:
-            self._width = np.sqrt(centroids_and_areas(self.quads)[1])
-        return self._width ** 2
+        if self._area is None:
+            self._area = centroids_and_areas(self.quads)[1]
+        return self._area
 
     def _hidden_at(self, pts, i, j, starts, occ, where):
         """Hidden form factors at the receiver points where the kernel left them (shapely unions).
