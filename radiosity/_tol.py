@@ -26,6 +26,9 @@ CHUNK_PAIRS = 200_000
 # Rays per embree call: large enough to amortise the call, small enough to stay in cache.
 CHUNK_RAYS = 1_000_000
 
+# The tightest relative tolerance a form factor may be asked for (``_validate.check_rtol``).
+MIN_RTOL = 1e-12
+
 # View factors below this are dropped from the sparse matrix; the dropped mass is reported.
 DROP_FACTOR = 1e-12
 

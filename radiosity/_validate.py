@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._tol import MIN_RTOL
+
 
 def as_points(x, name: str) -> np.ndarray:
     """Return ``x`` as a finite float64 (m, 3) array or raise ValueError naming ``name``."""
@@ -28,6 +30,13 @@ def as_unit_vectors(x, name: str) -> np.ndarray:
         raise ValueError(f"{name} must be non-zero vectors; row {bad} is zero")
     arr = arr / largest[:, None]
     return arr / np.linalg.norm(arr, axis=1)[:, None]
+
+
+def check_rtol(rtol: float, name: str = "rtol") -> None:
+    """Raise ValueError naming ``name`` unless ``rtol`` lies in [``MIN_RTOL``, 1): below 1e-12
+    the kernels' float64 sums cannot follow (the quadrature's orders run out first)."""
+    if not (MIN_RTOL <= rtol < 1):
+        raise ValueError(f"{name} must be in [{MIN_RTOL:g}, 1), got {rtol}")
 
 
 def as_polygon(x, name: str) -> np.ndarray:

@@ -20,6 +20,27 @@ def positive_metres(text: str) -> float:
     return value
 
 
+def positive_fraction(text: str) -> float:
+    """argparse type of tolerances (``--link-tolerance``): a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return value
+
+
+def fraction_or_zero(text: str) -> float:
+    """argparse type of ``--leaf-tolerance``: a finite number >= 0 (0: off)."""
+    try:
+        if float(text) == 0.0:
+            return 0.0
+    except ValueError:
+        pass
+    return positive_fraction(text)
+
+
 def add_scene_args(parser: argparse.ArgumentParser, *, optional_scene: bool) -> None:
     nargs = "?" if optional_scene else None
     parser.add_argument("scene", nargs=nargs, type=Path,

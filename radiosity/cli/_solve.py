@@ -19,7 +19,8 @@ from ..io.obj import MAX_COORDINATE
 from ..solve import solve
 from ..methods.uniform.system import DIRECT_MAX
 from ..viz import auto_exposure, white_balanced
-from ._common import add_camera_arg, add_scene_args, load, overrides, positive_metres, unit_scale
+from ._common import (add_camera_arg, add_scene_args, fraction_or_zero, load, overrides, positive_fraction,
+                      positive_metres, unit_scale)
 from ._record import run_record
 
 SENSOR_RTOL = 1e-3  # default bound on a sensor value's relative error from shadows
@@ -67,27 +68,6 @@ def add_args(parser) -> None:
     parser.add_argument("--sensor-rtol", type=sensor_rtol, default=SENSOR_RTOL, metavar="RTOL",
                         help="bound on the relative error of each --points value due to shadows "
                              "(0: every shadow exact; default: %(default)g)")
-
-
-def fraction_or_zero(text: str) -> float:
-    """argparse type of ``--leaf-tolerance``: a finite number >= 0 (0: off)."""
-    try:
-        if float(text) == 0.0:
-            return 0.0
-    except ValueError:
-        pass
-    return positive_fraction(text)
-
-
-def positive_fraction(text: str) -> float:
-    """argparse type of ``--link-tolerance``: a finite number > 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (np.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
-    return value
 
 
 def _method_options(args) -> dict:

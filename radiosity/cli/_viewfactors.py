@@ -13,13 +13,13 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
+from .._validate import check_rtol
 from ..enclosure import NotClosedError, diagnose
 from ..factors import GROUPINGS
 from ..io.export import atomic_paths, save_arrays, view_factor_arrays, write_vf
 from ..io.view3d import write_vs3
 from ..solve import compute_view_factors
-from ._common import add_scene_args, load, overrides
-from ._solve import positive_fraction
+from ._common import add_scene_args, load, overrides, positive_fraction
 
 NAME = "viewfactors"
 HELP = "compute the patch-to-patch view-factor matrix F (F[i, j] = F(i -> j)) with occlusion"
@@ -85,10 +85,12 @@ def cluster_overrides(args) -> dict:
 
 
 def _tolerance(text: str) -> float:
-    """argparse type of ``--tolerance``: a number in [1e-12, 1)."""
+    """argparse type of ``--tolerance``: a number the fill's kernels take (``check_rtol``)."""
     value = positive_fraction(text)
-    if not 1e-12 <= value < 1:
-        raise argparse.ArgumentTypeError(f"must be in [1e-12, 1), got {text!r}")
+    try:
+        check_rtol(value, "TOL")
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
     return value
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validate import as_polygon
+from .._validate import as_polygon, check_rtol
 from ..geometry import centroids_and_areas, polygon_normals, triangulate
 from ._quadrature import pair_factors
 
@@ -69,8 +69,7 @@ def polygon_to_polygon(receiver, source, *, rtol: float = 1e-6) -> float:
     """
     receiver = as_polygon(receiver, "receiver")
     source = as_polygon(source, "source")
-    if not (1e-12 <= rtol < 1):
-        raise ValueError(f"rtol must be in [1e-12, 1), got {rtol}")
+    check_rtol(rtol)
     # Work relative to a receiver vertex: quadrature nodes formed at 1e9 would lose 9 digits,
     # and for nearby vertices this subtraction is exact.
     origin = receiver[0].copy()

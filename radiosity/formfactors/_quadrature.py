@@ -13,6 +13,7 @@ from functools import lru_cache
 import numba as _numba
 import numpy as np
 
+from .._validate import check_rtol
 from ..geometry import centroids_and_areas, polygon_normals
 from ._closed_form import _MODES, _clip_to_upper
 from ._lambert import _quadrature_kernel, _quadrature_source_kernel
@@ -959,8 +960,7 @@ def pair_factors(quads, normals, centroid, area, i, j, *, rtol: float = 1e-6, so
     centroid = np.ascontiguousarray(centroid, dtype=float)
     i = np.ascontiguousarray(i, dtype=np.int64)
     j = np.ascontiguousarray(j, dtype=np.int64)
-    if not (1e-12 <= rtol < 1):
-        raise ValueError(f"rtol must be in [1e-12, 1), got {rtol}")
+    check_rtol(rtol)
     if max_points is not None and not np.all(np.asarray(max_points) >= 5):
         raise ValueError(f"max_points must be at least 5, got {max_points}")
     srcs = quads if sources is None else np.ascontiguousarray(sources, dtype=float)

@@ -28,6 +28,7 @@ import types
 import numba as _numba
 import numpy as np
 
+from ..._validate import check_rtol
 from ...formfactors import _quadrature as quadrature
 from ...formfactors._quadrature import _pair_rho
 from ...formfactors._lambert import _G_SIZE, _SRC_LANES, _source_block
@@ -548,8 +549,7 @@ def once_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, a
     ``block_pairs(..., two_area_rtol=rtol)`` lists them (else computed per pair)."""
     from ...formfactors._closed_form import _MODES
 
-    if not (1e-12 <= rtol < 1):
-        raise ValueError(f"rtol must be in [1e-12, 1), got {rtol}")
+    check_rtol(rtol)
     rec = np.asarray(rec, dtype=np.int64)
     src = np.asarray(src, dtype=np.int64)
     out = np.empty(len(rec))
