@@ -25,8 +25,26 @@ class Terminated(KeyboardInterrupt):
     """SIGTERM, raised like Ctrl-C so that staging folders and caches are cleaned up the same way."""
 
 
+# Signals the command received, newest last: a library can lose the exception a signal raised
+# inside it (VTK's module loader turns a SIGTERM among its imports into "ImportError: Failed to
+# load vtkIOXML: No module named vtkm...", without the Terminated as its cause), and the command
+# must still end as interrupted, not with "internal error".
+_received: list[int] = []
+
+
 def _raise_terminated(signum, frame):
+    _received.append(signum)
     raise Terminated()
+
+
+def _raise_interrupted(signum, frame):
+    _received.append(signum)
+    raise KeyboardInterrupt()
+
+
+def signal_received() -> int | None:
+    """The last SIGINT or SIGTERM the command received (None: none, or not the command)."""
+    return _received[-1] if _received else None
 
 
 def started_as_command() -> bool:
@@ -39,12 +57,15 @@ def started_as_command() -> bool:
 
 
 def exit_status(exc: BaseException) -> int:
-    """130 for Ctrl-C, 143 for SIGTERM (also when the signal is the cause of another error)."""
+    """130 for Ctrl-C, 143 for SIGTERM (also when the signal is the cause of another error, or
+    the error lost its cause but the command received the signal)."""
+    ctrl_c = False
     while exc is not None:
         if isinstance(exc, Terminated):
             return EXIT_TERMINATED
+        ctrl_c |= isinstance(exc, KeyboardInterrupt)
         exc = exc.__cause__ or exc.__context__
-    return EXIT_INTERRUPTED
+    return EXIT_TERMINATED if not ctrl_c and signal_received() == signal.SIGTERM else EXIT_INTERRUPTED
 
 
 HELD_SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -158,6 +179,8 @@ def guard_imports():
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     if command:
         signal.signal(signal.SIGTERM, _raise_terminated)
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not ignored by the caller
+            signal.signal(signal.SIGINT, _raise_interrupted)
     try:
         if command:  # inside the try: it imports numba, seconds in which a Ctrl-C may come
             hold_signals_while_compiling()

@@ -180,3 +180,28 @@ def test_the_command_waits_passively_unless_told_otherwise():
     env["OMP_WAIT_POLICY"] = "ACTIVE"
     got = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=60)
     assert got.stdout.split() == ["ACTIVE"], got.stderr
+
+
+def test_an_interrupt_a_library_dropped_still_ends_as_interrupted(tmp_path, monkeypatch, capsys):
+    """VTK's module loader turned a SIGTERM among its imports into "ImportError: Failed to load
+    vtkIOXML: No module named vtkm...", without the Terminated as its cause: the command ended
+    with "internal error" and exit 1 (test_signals_at_random_moments_end_cleanly, once). The
+    command now notes the signals it receives, and an error after one is the interrupt."""
+    import radiosity
+    import radiosity._startup as startup
+    import radiosity.cli._viewfactors as command
+    from radiosity.cli import main
+
+    def vtk_loader(*args, **kwargs):
+        raise ImportError("Failed to load vtkIOXML: No module named vtkmodules.vtkIOXML")
+
+    monkeypatch.setattr(command, "compute_view_factors", vtk_loader)
+    args = ["viewfactors", radiosity.bundled_scene("unit_cube"), "-o", str(tmp_path / "F.npz")]
+    assert main([str(a) for a in args]) == 1  # no signal: a bug, reported as one
+    assert "internal error" in capsys.readouterr().err
+    monkeypatch.setattr(startup, "_received", [signal.SIGTERM])
+    assert main([str(a) for a in args]) == 143
+    assert capsys.readouterr().err.strip().splitlines()[-1] == INTERRUPTED_LINE
+    monkeypatch.setattr(startup, "_received", [signal.SIGINT])
+    assert main([str(a) for a in args]) == 130
+    assert not (tmp_path / "F.npz").exists()

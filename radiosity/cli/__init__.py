@@ -19,7 +19,7 @@ import sys
 import warnings
 
 from .._errors import MemoryBudgetError, RadiosityError, RadiosityWarning
-from .._startup import INTERRUPTED_LINE, PROG, exit_status, guard_imports
+from .._startup import INTERRUPTED_LINE, PROG, exit_status, guard_imports, signal_received
 
 with guard_imports():
     from . import _cache, _exchange, _solve, _view, _viewfactors
@@ -143,12 +143,13 @@ def _interrupted(exc: BaseException) -> int:
 
 
 def _is_interrupt(exc: BaseException | None) -> bool:
-    """Whether ``exc`` is, or was raised while handling, a Ctrl-C or SIGTERM."""
+    """Whether ``exc`` is, or was raised while handling, a Ctrl-C or SIGTERM, or the command
+    received one (a library may drop the interrupt from the error it raises instead)."""
     while exc is not None:
         if isinstance(exc, KeyboardInterrupt):
             return True
         exc = exc.__cause__ or exc.__context__
-    return False
+    return signal_received() is not None
 
 
 def entry() -> None:
