@@ -9,7 +9,8 @@ then classified exactly, before any ray:
   edges). The crossing points of all segments between two convex patches lie in the convex hull
   of the crossing points of those 16 segments, because a central projection maps a convex
   patch to the convex hull of its projected vertices.
-* full: all 16 crossing points lie inside the convex polygon, so every segment crosses it.
+* full: all 16 crossing points lie inside the convex polygon or on its edges, so every segment
+  crosses it (those through an edge are a set of measure zero).
 * maybe: anything else (a patch straddles the plane, or the bundle meets an edge).
 """
 
@@ -260,7 +261,7 @@ def _classify_chunk(occ, vi, vj, k, scale):
         g = np.einsum("tpmc,tmc->tpm", m[:, :, None, :] - P[:, None, :, :], inward)  # (t, 16, m)
         valid = inward.any(axis=2)[:, None, :]
         separated = ((g < tol) & valid).all(axis=1).any(axis=1)  # one edge has all points outside
-        inside = ((g > tol) | ~valid).all(axis=(1, 2)) & den_ok
+        inside = ((g > -tol) | ~valid).all(axis=(1, 2)) & den_ok  # on an edge counts as inside
         state = np.full(len(o), MAYBE, np.int8)
         state[separated] = FREE
         state[inside & ~separated] = FULL
