@@ -16,6 +16,9 @@ MERGE_AREA_REL = 1e-9
 
 # Merged occluder polygons keep at most this many vertices (more: the patches stay separate).
 MAX_OCCLUDER_VERTICES = 8
+# coplanar occluders of different objects are merged two at a time in planes holding at most
+# this many (every two are tried: quadratic)
+CROSS_MERGE_MAX = 32
 
 # Occluders per node leaf of the bounding-volume hierarchy used to find a pair's occluders.
 BVH_LEAF = 4

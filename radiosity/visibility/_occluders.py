@@ -22,7 +22,7 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from ..geometry import centroids_and_areas, vector_areas
-from ._constants import BVH_LEAF, CHUNK_TRIPLES, MAX_OCCLUDER_VERTICES, MERGE_AREA_REL, PLANE_REL
+from ._constants import BVH_LEAF, CHUNK_TRIPLES, CROSS_MERGE_MAX, MAX_OCCLUDER_VERTICES, MERGE_AREA_REL, PLANE_REL
 
 __all__ = ["Occluders", "build_occluders", "FREE", "FULL", "MAYBE"]
 
@@ -81,6 +81,51 @@ def _merge_group(quads: np.ndarray, normal: np.ndarray, area: float) -> np.ndarr
     return origin + ring[:, :1] * u + ring[:, 1:] * w + depth * normal
 
 
+def _polygon_area(poly: np.ndarray) -> float:
+    return 0.5 * float(np.linalg.norm(np.cross(poly, np.roll(poly, -1, axis=0)).sum(axis=0)))
+
+
+def _merge_across_objects(polys: list[np.ndarray], members_of: list[np.ndarray], planes: np.ndarray
+                          ) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Merge coplanar polygons of different objects, two at a time, wherever two tile a convex one.
+
+    A thermal model's wall is often several surfaces (View3D's 398-surface hall: the wall under a
+    clerestory is two, 0-5 m and 5-7 m). Each alone hid part of what the wall hides, so a pair
+    behind the wall was partly occluded by both, never fully by one, and its adaptive squares
+    split to the deepest level along the seam (103 s a pair). Planes with more than
+    ``CROSS_MERGE_MAX`` polygons are left as they are (the merge tries every two).
+    """
+    if len(polys) < 2:
+        return polys, members_of
+    _, plane_of = np.unique(planes, axis=0, return_inverse=True)
+    plane_of = plane_of.ravel()
+    out = []  # (first polygon index, polygon, patches): in the input's order where nothing merges
+    for members in np.split(np.argsort(plane_of, kind="stable"), np.cumsum(np.bincount(plane_of))[:-1]):
+        ring = [polys[m] for m in members]
+        mem = [members_of[m] for m in members]
+        first = list(members)
+        if 1 < len(ring) <= CROSS_MERGE_MAX:
+            normal = np.cross(ring[0][1] - ring[0][0], ring[0][2] - ring[0][0])
+            normal = normal / np.linalg.norm(normal) if np.linalg.norm(normal) > 0 else normal
+            area = [_polygon_area(p) for p in ring]
+            merged = True
+            while merged and len(ring) > 1 and normal.any():
+                merged = False
+                for a in range(len(ring)):
+                    for b in range(a + 1, len(ring)):
+                        both = _merge_group(np.concatenate([ring[a], ring[b]]), normal, area[a] + area[b])
+                        if both is not None:
+                            ring[a], mem[a], area[a] = both, np.concatenate([mem[a], mem[b]]), area[a] + area[b]
+                            del ring[b], mem[b], area[b], first[b]
+                            merged = True
+                            break
+                    if merged:
+                        break
+        out.extend(zip(first, ring, mem))
+    out.sort(key=lambda t: t[0])
+    return [p for _, p, _ in out], [m for _, _, m in out]
+
+
 def _pad(polys: list[np.ndarray]) -> np.ndarray:
     m = max(len(p) for p in polys)
     out = np.empty((len(polys), m, 3))
@@ -103,6 +148,7 @@ def build_occluders(quads: np.ndarray, normals: np.ndarray, groups: np.ndarray, 
     idx = np.flatnonzero(mask & normals.any(axis=1))
     polys: list[np.ndarray] = []
     members_of: list[np.ndarray] = []  # the patches of each polygon
+    planes: list[np.ndarray] = []  # the plane key of each polygon
     if len(idx):
         n = normals[idx]
         # one sign per plane, so both faces of a thin wall fall in the same group
@@ -128,6 +174,8 @@ def build_occluders(quads: np.ndarray, normals: np.ndarray, groups: np.ndarray, 
             else:
                 polys.extend(_dedupe(quads[p]) for p in idx[members])
                 members_of.extend(idx[members, None])
+            planes.extend([key[members[0], 1:]] * (1 if merged is not None else len(members)))
+        polys, members_of = _merge_across_objects(polys, members_of, np.array(planes))
     if not polys:
         z = np.zeros((0, 3))
         zi = np.zeros(0, np.int64)
@@ -146,7 +194,9 @@ def build_occluders(quads: np.ndarray, normals: np.ndarray, groups: np.ndarray, 
     inward *= np.where(sign < 0, -1.0, 1.0)[..., None]
     lo, hi = P.min(axis=1), P.max(axis=1)
     group = np.array([groups[m[0]] for m in members_of], np.int64)
-    front = np.array([_front_sign(normals[m] @ nk) for m, nk in zip(members_of, normal)], np.int8)
+    # a polygon of several objects takes no part in closed-object culling (front 0)
+    front = np.array([_front_sign(normals[m] @ nk) if len(np.unique(groups[m])) == 1 else 0
+                      for m, nk in zip(members_of, normal)], np.int8)
     return Occluders(P, normal, center, inward, lo, hi, *_build_bvh(lo, hi), group, front)
 
 
