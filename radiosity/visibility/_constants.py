@@ -36,8 +36,10 @@ CHUNK_SHADOWS = 100_000
 # up to _exact_kernel.IE_MAX_POLYGONS, then the sum over the union's boundary, n^2 edge tests);
 # more go to shapely. 10 while inclusion-exclusion did it all: 12-sided concentric prisms sent
 # points with ~20 to shapely, and their 72-patch view factors took 100 s instead of 33 s. 32 until
-# 2026-12-03: in a furnished room at draft 6,017 points went to shapely with 33-62 each.
-MAX_UNION = 64
+# 2026-12-03: in a furnished room at draft 6,017 points went to shapely with 33-62 each. 64 until
+# session 21: in View3D's 398-surface hall a wall's points see 100+ fins and ceiling strips, and
+# shapely's unions took 1.8-3.7x the compiled sum's time on those pairs (the same factors).
+MAX_UNION = 512
 # "auto" visibility sends a partly occluded pair to exact shadows whatever its factor when it
 # has at most this many possible occluders (no receiver point can need shapely; kept at 32 when
 # MAX_UNION went to 64, so the exact pairs of default and fine stayed the same) and
