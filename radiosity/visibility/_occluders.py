@@ -81,49 +81,49 @@ def _merge_group(quads: np.ndarray, normal: np.ndarray, area: float) -> np.ndarr
     return origin + ring[:, :1] * u + ring[:, 1:] * w + depth * normal
 
 
-def _polygon_area(poly: np.ndarray) -> float:
-    return 0.5 * float(np.linalg.norm(np.cross(poly, np.roll(poly, -1, axis=0)).sum(axis=0)))
-
-
 def _merge_across_objects(polys: list[np.ndarray], members_of: list[np.ndarray], planes: np.ndarray
                           ) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Merge coplanar polygons of different objects, two at a time, wherever two tile a convex one.
 
-    A thermal model's wall is often several surfaces (View3D's 398-surface hall: the wall under a
-    clerestory is two, 0-5 m and 5-7 m). Each alone hid part of what the wall hides, so a pair
-    behind the wall was partly occluded by both, never fully by one, and its adaptive squares
-    split to the deepest level along the seam (103 s a pair). Planes with more than
-    ``CROSS_MERGE_MAX`` polygons are left as they are (the merge tries every two).
+    A thermal model's wall is often several surfaces (in View3D's 398-surface hall one wall is
+    four: two spans, each cut at a ledge's height). Each alone hid part of what the wall hides,
+    so a pair behind the wall was partly occluded by all, fully by none: its adaptive squares
+    split to the deepest level along the seams (103 s a pair), and light leaked through them.
+    Planes holding more than ``CROSS_MERGE_MAX`` polygons are left as they are (every two are
+    tried). The polygons keep the input's order where nothing merges.
     """
     if len(polys) < 2:
         return polys, members_of
     _, plane_of = np.unique(planes, axis=0, return_inverse=True)
     plane_of = plane_of.ravel()
-    out = []  # (first polygon index, polygon, patches): in the input's order where nothing merges
+    out = []  # (index of the first polygon, polygon, patches)
     for members in np.split(np.argsort(plane_of, kind="stable"), np.cumsum(np.bincount(plane_of))[:-1]):
-        ring = [polys[m] for m in members]
-        mem = [members_of[m] for m in members]
-        first = list(members)
+        ring = [(int(m), polys[m], members_of[m]) for m in members]
         if 1 < len(ring) <= CROSS_MERGE_MAX:
-            normal = np.cross(ring[0][1] - ring[0][0], ring[0][2] - ring[0][0])
-            normal = normal / np.linalg.norm(normal) if np.linalg.norm(normal) > 0 else normal
-            area = [_polygon_area(p) for p in ring]
-            merged = True
-            while merged and len(ring) > 1 and normal.any():
-                merged = False
-                for a in range(len(ring)):
-                    for b in range(a + 1, len(ring)):
-                        both = _merge_group(np.concatenate([ring[a], ring[b]]), normal, area[a] + area[b])
-                        if both is not None:
-                            ring[a], mem[a], area[a] = both, np.concatenate([mem[a], mem[b]]), area[a] + area[b]
-                            del ring[b], mem[b], area[b], first[b]
-                            merged = True
-                            break
-                    if merged:
-                        break
-        out.extend(zip(first, ring, mem))
+            ring = _merge_plane(ring)
+        out.extend(ring)
     out.sort(key=lambda t: t[0])
     return [p for _, p, _ in out], [m for _, _, m in out]
+
+
+def _merge_plane(ring: list[tuple[int, np.ndarray, np.ndarray]]) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """(first index, polygon, patches) of one plane, merged two at a time while two tile a convex polygon."""
+    vector = [0.5 * np.cross(p, np.roll(p, -1, axis=0)).sum(axis=0) for _, p, _ in ring]
+    area = [float(np.linalg.norm(v)) for v in vector]
+    k = int(np.argmax(area))
+    if area[k] == 0.0:
+        return ring
+    normal = vector[k] / area[k]
+    while True:
+        pair = next(((a, b, both) for a in range(len(ring)) for b in range(a + 1, len(ring))
+                     if (both := _merge_group(np.concatenate([ring[a][1], ring[b][1]]), normal,
+                                              area[a] + area[b])) is not None), None)
+        if pair is None:
+            return ring
+        a, b, both = pair
+        ring[a] = (ring[a][0], both, np.concatenate([ring[a][2], ring[b][2]]))
+        area[a] += area[b]
+        del ring[b], area[b]
 
 
 def _pad(polys: list[np.ndarray]) -> np.ndarray:

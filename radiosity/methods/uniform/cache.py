@@ -40,7 +40,8 @@ FORMAT_VERSION = 1
 # pairs behind up to 16 occluders (session 16). 6: at view_factors' tolerances the squares test
 # for shadows between their points to 6 levels and split to 7 (SHADOW_TIGHT_MAX_DEPTH), and shadow
 # cells whose grading was capped are settled on both sides (Visibility._settle_capped). 7: an
-# occluder whose crossings lie inside it or on its edges hides the whole pair (session 21).
+# occluder whose crossings lie inside it or on its edges hides the whole pair, coplanar occluders
+# of different objects merge, squares keep their own occluders (session 21).
 FILL_VERSION = 7
 ENV_SIZE = "RADIOSITY_CACHE_SIZE"
 DEFAULT_LIMIT = 2 << 30  # 2 GiB: a few hundred Cornell-box-sized matrices, a handful of big ones
