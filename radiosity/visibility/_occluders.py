@@ -114,16 +114,23 @@ def _merge_plane(ring: list[tuple[int, np.ndarray, np.ndarray]]) -> list[tuple[i
     if area[k] == 0.0:
         return ring
     normal = vector[k] / area[k]
+    box = [(p.min(axis=0), p.max(axis=0)) for _, p, _ in ring]
+    pad = 1e-9 * max(float(np.ptp(p, axis=0).max()) for _, p, _ in ring)
+
+    def touch(a, b):  # two polygons that tile a convex one share an edge: their boxes meet
+        return bool((box[a][0] <= box[b][1] + pad).all() and (box[b][0] <= box[a][1] + pad).all())
+
     while True:
         pair = next(((a, b, both) for a in range(len(ring)) for b in range(a + 1, len(ring))
-                     if (both := _merge_group(np.concatenate([ring[a][1], ring[b][1]]), normal,
-                                              area[a] + area[b])) is not None), None)
+                     if touch(a, b) and (both := _merge_group(np.concatenate([ring[a][1], ring[b][1]]), normal,
+                                                              area[a] + area[b])) is not None), None)
         if pair is None:
             return ring
         a, b, both = pair
         ring[a] = (ring[a][0], both, np.concatenate([ring[a][2], ring[b][2]]))
+        box[a] = (both.min(axis=0), both.max(axis=0))
         area[a] += area[b]
-        del ring[b], area[b]
+        del ring[b], area[b], box[b]
 
 
 def _pad(polys: list[np.ndarray]) -> np.ndarray:
