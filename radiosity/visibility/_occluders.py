@@ -81,7 +81,7 @@ def _merge_group(quads: np.ndarray, normal: np.ndarray, area: float) -> np.ndarr
     return origin + ring[:, :1] * u + ring[:, 1:] * w + depth * normal
 
 
-def _merge_across_objects(polys: list[np.ndarray], members_of: list[np.ndarray], planes: np.ndarray
+def _merge_across_objects(polys: list[np.ndarray], members_of: list[np.ndarray], planes: np.ndarray, tol: float
                           ) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Merge coplanar polygons of different objects, two at a time, wherever two tile a convex one.
 
@@ -100,14 +100,16 @@ def _merge_across_objects(polys: list[np.ndarray], members_of: list[np.ndarray],
     for members in np.split(np.argsort(plane_of, kind="stable"), np.cumsum(np.bincount(plane_of))[:-1]):
         ring = [(int(m), polys[m], members_of[m]) for m in members]
         if 1 < len(ring) <= CROSS_MERGE_MAX:
-            ring = _merge_plane(ring)
+            ring = _merge_plane(ring, tol)
         out.extend(ring)
     out.sort(key=lambda t: t[0])
     return [p for _, p, _ in out], [m for _, _, m in out]
 
 
-def _merge_plane(ring: list[tuple[int, np.ndarray, np.ndarray]]) -> list[tuple[int, np.ndarray, np.ndarray]]:
-    """(first index, polygon, patches) of one plane, merged two at a time while two tile a convex polygon."""
+def _merge_plane(ring: list[tuple[int, np.ndarray, np.ndarray]], tol: float
+                 ) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """(first index, polygon, patches) of one plane, merged two at a time while two tile a convex
+    polygon; ``tol``: how far apart two polygons' boxes may be and still touch."""
     vector = [0.5 * np.cross(p, np.roll(p, -1, axis=0)).sum(axis=0) for _, p, _ in ring]
     area = [float(np.linalg.norm(v)) for v in vector]
     k = int(np.argmax(area))
@@ -115,10 +117,9 @@ def _merge_plane(ring: list[tuple[int, np.ndarray, np.ndarray]]) -> list[tuple[i
         return ring
     normal = vector[k] / area[k]
     box = [(p.min(axis=0), p.max(axis=0)) for _, p, _ in ring]
-    pad = 1e-9 * max(float(np.ptp(p, axis=0).max()) for _, p, _ in ring)
 
     def touch(a, b):  # two polygons that tile a convex one share an edge: their boxes meet
-        return bool((box[a][0] <= box[b][1] + pad).all() and (box[b][0] <= box[a][1] + pad).all())
+        return bool((box[a][0] <= box[b][1] + tol).all() and (box[b][0] <= box[a][1] + tol).all())
 
     while True:
         pair = next(((a, b, both) for a in range(len(ring)) for b in range(a + 1, len(ring))
@@ -182,7 +183,7 @@ def build_occluders(quads: np.ndarray, normals: np.ndarray, groups: np.ndarray, 
                 polys.extend(_dedupe(quads[p]) for p in idx[members])
                 members_of.extend(idx[members, None])
             planes.extend([key[members[0], 1:]] * (1 if merged is not None else len(members)))
-        polys, members_of = _merge_across_objects(polys, members_of, np.array(planes))
+        polys, members_of = _merge_across_objects(polys, members_of, np.array(planes), PLANE_REL * scale)
     if not polys:
         z = np.zeros((0, 3))
         zi = np.zeros(0, np.int64)
@@ -202,7 +203,7 @@ def build_occluders(quads: np.ndarray, normals: np.ndarray, groups: np.ndarray, 
     lo, hi = P.min(axis=1), P.max(axis=1)
     group = np.array([groups[m[0]] for m in members_of], np.int64)
     # a polygon of several objects takes no part in closed-object culling (front 0)
-    front = np.array([_front_sign(normals[m] @ nk) if len(np.unique(groups[m])) == 1 else 0
+    front = np.array([_front_sign(normals[m] @ nk) if (groups[m] == groups[m[0]]).all() else 0
                       for m, nk in zip(members_of, normal)], np.int8)
     return Occluders(P, normal, center, inward, lo, hi, *_build_bvh(lo, hi), group, front)
 

@@ -541,8 +541,7 @@ class Visibility:
                 # polynomial then misses the value
                 check = np.flatnonzero(done & ~same)
                 if len(check):
-                    at = self._corner_hidden(i, j, _subset_lists(*lists, check), pair[check], corner[check],
-                                             size[check])
+                    at = self._corner_hidden(i, j, lists, check, pair[check], corner[check], size[check])
                     miss = np.abs(at - _corner_extrapolation(child_values.reshape(-1, 4, order * order)[check],
                                                              order)).max(axis=1)
                     allowed = atol[pair[check]] * patch_area[pair[check]] * share[check]
@@ -650,9 +649,8 @@ class Visibility:
         first = np.flatnonzero(full)
         first = first[np.r_[True, row[first[1:]] != row[first[:-1]]]] if len(first) else first
         keep[first] = True
-        new = np.zeros(len(pair) + 1, np.int64)
-        np.cumsum(np.bincount(row[keep], minlength=len(pair)), out=new[1:])
-        return (new, occ[keep]), (new[1:] > new[:-1]) & ~hidden
+        kept = _occluder_lists(row[keep], occ[keep], len(pair))
+        return kept, (np.diff(kept[0]) > 0) & ~hidden
 
     def _cell_hidden(self, i, j, lists, pair, corner, size, order):
         """Integral of F(x -> hidden) over receiver cells (pair, corner, size), their areas, their
@@ -675,16 +673,16 @@ class Visibility:
             state[s:e] = lit.astype(np.int8) | (dark.astype(np.int8) << 1)
         return out, area, state, values
 
-    def _corner_hidden(self, i, j, lists, pair, corner, size) -> np.ndarray:
-        """(c, 4) hidden factors at the corners of cells, in :func:`square_cell_corners`' order
-        (``lists``: one occluder list per cell)."""
+    def _corner_hidden(self, i, j, lists, cells, pair, corner, size) -> np.ndarray:
+        """(c, 4) hidden factors at the corners of cells (pair, corner, size), in
+        :func:`square_cell_corners`' order; their occluders are rows ``cells`` of ``lists``."""
         out = np.zeros((len(pair), 4))
         step = max(1, CHUNK_SHADOWS // 4)
         for s in range(0, len(pair), step):
             e = min(len(pair), s + step)
             p = pair[s:e]
             pts = square_cell_corners(self.quads[i[p]], corner[s:e, 0], corner[s:e, 1], size[s:e])
-            out[s:e] = self._points_hidden(pts, i[p], j[p], lists, np.arange(s, e))[1]
+            out[s:e] = self._points_hidden(pts, i[p], j[p], lists, cells[s:e])[1]
         return out
 
     def _points_hidden(self, pts, i, j, lists, p):
