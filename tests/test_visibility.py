@@ -502,3 +502,59 @@ def test_squares_own_occluders_change_nothing_but_the_work(monkeypatch):
     reference = vis.adaptive_hidden(*args, penumbra_depth=2, max_depth=3)
     assert len(part) > 50 and reference.max() > 0
     np.testing.assert_allclose(own, reference, rtol=1e-12, atol=1e-15)
+
+
+def _staggered_slats(gap_at: float):
+    """A unit source (z = 0, facing up), a receiver above it (z = 2, facing down) and two
+    slats at different heights that overlap as seen from a receiver square over x in
+    [0.4, 0.6] when the upper one starts at x = 0.4, and leave it a gap when it starts at 0.7."""
+    source = rect(0, 1, 0, 1, 0)
+    receiver = rect(0, 1, 0, 1, 2, down=True)
+    lower = rect(-1, 0.6, -1, 2, 1, down=True)
+    upper = rect(gap_at, 2, -1, 2, 1.3, down=True)
+    return [source, receiver, lower, upper]
+
+
+@pytest.mark.parametrize("gap_at, covered", [(0.4, True), (0.7, False)])
+def test_occluders_that_hide_a_square_only_together_cover_it(gap_at, covered):
+    """Two slats at different heights, neither of which hides a receiver square alone, hide it
+    together: the intersection over the square's corners of each one's hidden polygon on the
+    source is hidden from all of the square (its points' segments to a source point that
+    meet a convex occluder form a convex set), and the union of those covers the source.
+    Moved apart, they leave a gap and the square is not covered."""
+    from radiosity.visibility._exact_kernel import covered_squares
+
+    quads = _staggered_slats(gap_at)
+    vis = make_vis(quads)
+    o = vis.occluders
+    slats = [int(np.argmin(np.abs(o.center[:, 2] - z))) for z in (1.0, 1.3)]
+    square = np.array([[[0.4, 0.4, 2.0], [0.6, 0.4, 2.0], [0.6, 0.6, 2.0], [0.4, 0.6, 2.0]]])
+    down, up = np.array([[0.0, 0.0, -1.0]]), np.array([[0.0, 0.0, 1.0]])
+    source = np.asarray(quads[0])[None]
+
+    def cover(occ):
+        occ = np.asarray(occ, np.int64)
+        return bool(covered_squares(square, square.mean(axis=1), down, source, up, np.array([0, len(occ)]), occ,
+                                    o.polys, o.normal, 1e-12, 64)[0])
+
+    assert cover(slats) is covered
+    assert not cover(slats[:1]) and not cover(slats[1:])
+
+
+def test_squares_covered_together_change_nothing_but_the_work(monkeypatch):
+    """Squares that two slats hide together stop splitting; the hidden factor is the one of
+    squares split to the deepest level wherever no single occluder hides them, within the
+    quadrature error of the unoccluded factor on the squares that stop (the tolerance, 1e-6)."""
+    from radiosity.visibility._pairs import Visibility
+
+    vis = make_vis(_staggered_slats(0.4))
+    i, j = np.array([1]), np.array([0])
+    status, rows, occ = vis.classify(i, j)
+    assert status.tolist() == [MAYBE]
+    fused = vis.adaptive_hidden(i, j, rows, occ, 1e-6, penumbra_depth=4, max_depth=5)
+    fused_rows = vis.n_exact_rows
+    monkeypatch.setattr(Visibility, "_squares_covered", lambda self, i, j, lists, cells, *a: np.zeros(len(cells), bool))
+    vis.n_exact_rows = 0
+    split = vis.adaptive_hidden(i, j, rows, occ, 1e-6, penumbra_depth=4, max_depth=5)
+    np.testing.assert_allclose(fused, split, rtol=0, atol=1e-7)
+    assert 0 < fused[0] < 1 and fused_rows < vis.n_exact_rows / 2

@@ -364,6 +364,7 @@ def _union_factor_edges(x, nx, hp, hn, n_polys, sn, poly, count, iv):
         for v in range(count[k]):
             extent = max(extent, abs(poly[k, v, 0] - x[0]) + abs(poly[k, v, 1] - x[1]) + abs(poly[k, v, 2] - x[2]))
     eps = _ON_LINE_REL * extent
+    inward, box = _edge_frames(poly, count, n_polys, sn)
     total = 0.0
     for k in range(n_polys):
         n = count[k]
@@ -374,7 +375,7 @@ def _union_factor_edges(x, nx, hp, hn, n_polys, sn, poly, count, iv):
             dz = poly[k, e2, 2] - poly[k, e, 2]
             if abs(dx) + abs(dy) + abs(dz) <= eps:
                 continue
-            n_iv = _covered_intervals(poly, count, n_polys, k, e, sn, eps, iv)
+            n_iv = _covered_intervals(poly, count, n_polys, k, e, eps, iv, inward, box)
             # walk the uncovered pieces of the edge, intervals in order of their start
             for a in range(1, n_iv):
                 lo, hi = iv[a, 0], iv[a, 1]
@@ -395,6 +396,31 @@ def _union_factor_edges(x, nx, hp, hn, n_polys, sn, poly, count, iv):
     return min(abs(total) / _TWO_PI, 1.0)
 
 
+@njit(cache=True)
+def _edge_frames(poly, count, n_polys, sn):
+    """Each polygon's edges' inward in-plane normals and lengths, inward (n_polys, cap, 4), and
+    its box, box (n_polys, 6): computed once per union, not once per pair of edges (a point
+    behind 80 of View3D's hall's obstructions spent most of its time recomputing them)."""
+    cap = poly.shape[1]
+    inward = np.empty((n_polys, cap, 4))
+    box = np.empty((n_polys, 6))
+    for k in range(n_polys):
+        n = count[k]
+        for c in range(3):
+            box[k, c] = np.inf
+            box[k, 3 + c] = -np.inf
+        for f in range(n):
+            mx, my, mz, ln = _inward(poly[k], n, f, sn)
+            inward[k, f, 0] = mx
+            inward[k, f, 1] = my
+            inward[k, f, 2] = mz
+            inward[k, f, 3] = ln
+            for c in range(3):
+                box[k, c] = min(box[k, c], poly[k, f, c])
+                box[k, 3 + c] = max(box[k, 3 + c], poly[k, f, c])
+    return inward, box
+
+
 @njit(cache=True, inline="always")
 def _inward(poly, n, f, sn):
     """In-plane normal of edge f of the convex polygon poly[:n], pointing into it, and its length."""
@@ -412,21 +438,29 @@ def _inward(poly, n, f, sn):
 
 
 @njit(cache=True)
-def _covered_intervals(poly, count, n_polys, k, e, sn, eps, iv):
-    """Parameter intervals of edge e of polygon k lying inside the other polygons, into iv; their count."""
+def _covered_intervals(poly, count, n_polys, k, e, eps, iv, inward, box):
+    """Parameter intervals of edge e of polygon k lying inside the other polygons, into iv; their
+    count. ``inward``, ``box``: :func:`_edge_frames`. A polygon whose box misses the edge's
+    (padded by the on-line margin) holds none of it."""
     n = count[k]
     e2 = e + 1 if e + 1 < n else 0
     p = poly[k, e]
     q = poly[k, e2]
-    kx, ky, kz, _ = _inward(poly[k], n, e, sn)
+    kx, ky, kz = inward[k, e, 0], inward[k, e, 1], inward[k, e, 2]
+    pad = 2.0 * eps
+    lo0, lo1, lo2 = min(p[0], q[0]) - pad, min(p[1], q[1]) - pad, min(p[2], q[2]) - pad
+    hi0, hi1, hi2 = max(p[0], q[0]) + pad, max(p[1], q[1]) + pad, max(p[2], q[2]) + pad
     n_iv = 0
     for m in range(n_polys):
         if m == k or count[m] == 0:
             continue
+        if (box[m, 0] > hi0 or box[m, 1] > hi1 or box[m, 2] > hi2 or box[m, 3] < lo0 or box[m, 4] < lo1
+                or box[m, 5] < lo2):
+            continue
         lo = 0.0
         hi = 1.0
         for f in range(count[m]):
-            mx, my, mz, ln = _inward(poly[m], count[m], f, sn)
+            mx, my, mz, ln = inward[m, f, 0], inward[m, f, 1], inward[m, f, 2], inward[m, f, 3]
             if ln <= 0.0:
                 continue
             a = poly[m, f]
@@ -695,6 +729,115 @@ def exact_pairs(pts, normals, quads, i, j, starts, occ, opolys, onormal, tol, ma
         _exact_block(blk * _GROUP_BLOCK, min(m, (blk + 1) * _GROUP_BLOCK), pts, normals, quads, i, j, starts, occ,
                      opolys, onormal, tol, max_union, unocc, hidden, ok)
     return unocc, hidden, ok
+
+
+# A square counts as hidden when the union of its fused shadows leaves less than this share of
+# the source's factor from its centre (the boundary sums of a covered source agree to ~1e-14).
+COVER_REL = 1e-9
+
+
+@njit(cache=True)
+def _fused_polygon(xc, src, ns, sn, occ, ms, on, tol, a, b, s1, s2, out, sa, sb):
+    """Part of src[:ns] hidden by occ[:ms] from each of the corners xc (4, 3), into out; its count.
+
+    A source point q hidden from every corner is hidden from every point of the corners' hull:
+    the points p whose segment to q meets a convex occluder form a convex set (the cone from q
+    over it, beyond it), so the intersection of the corners' hidden polygons is hidden from the
+    whole square (Durand et al.'s extended projection onto the source's plane).
+    """
+    m = _hidden_polygon(xc[0], src, ns, sn, occ, ms, on, tol, a, b, s1, s2)
+    if m < 3:
+        return 0
+    for v in range(m):
+        out[v, 0] = s1[v, 0]
+        out[v, 1] = s1[v, 1]
+        out[v, 2] = s1[v, 2]
+    for c in range(1, xc.shape[0]):
+        m2 = _hidden_polygon(xc[c], src, ns, sn, occ, ms, on, tol, a, b, s1, s2)
+        if m2 < 3:
+            return 0
+        m = _intersect(out, m, s1, m2, sn, out, sa, sb)
+        if m < 3:
+            return 0
+    return m
+
+
+@njit(cache=True)
+def _square_covered(xc, center, nx, src, sn, occ, t0, t1, opolys, onormal, tol, max_union, a, b, s1, s2, hp, hn,
+                    levels, lcount, nxt, sa, sb, slab_a, slab_b):
+    """True if the occluders opolys[occ[t0:t1]] together hide source src from the whole receiver
+    square with corners xc (4, 3), centre ``center`` and normal nx.
+
+    Each occluder is first cut to the slab between the source's plane and the square's nearest
+    corner (what lies there is between every point of the square and the source), then fused
+    over the corners (:func:`_fused_polygon`); the square is hidden where the union of those
+    polygons covers the part of the source above its plane, which its centre's factor measures.
+    A union of occluders none of which hides the square alone (a wall of many surfaces) covers
+    it here; point by point, squares behind it were split to the deepest level.
+    """
+    ns = src.shape[0]
+    ms = opolys.shape[1]
+    cx, cy, cz = _mean_vertex(src, ns)
+    side = (center[0] - cx) * sn[0] + (center[1] - cy) * sn[1] + (center[2] - cz) * sn[2]
+    flip = -1.0 if side < 0 else 1.0
+    px, py, pz = sn[0] * flip, sn[1] * flip, sn[2] * flip
+    off = -(px * cx + py * cy + pz * cz)
+    dmin = np.inf
+    for c in range(xc.shape[0]):
+        dmin = min(dmin, px * xc[c, 0] + py * xc[c, 1] + pz * xc[c, 2] + off)
+    if dmin <= tol:
+        return False  # a corner on or behind the source's plane
+    unocc = _lambert(center, nx, src, ns, s2)
+    if unocc <= 0.0:
+        return False
+    count = 0
+    for t in range(t0, t1):
+        k = occ[t]
+        n1 = _clip(opolys[k], ms, slab_a, px, py, pz, off)
+        n2 = _clip(slab_a, n1, slab_b, -px, -py, -pz, dmin - off)
+        if n2 < 3:
+            continue
+        if count >= max_union:
+            return False
+        m = _fused_polygon(xc, src, ns, sn, slab_b, n2, onormal[k], tol, a, b, s1, s2, hp[count], sa, sb)
+        if m >= 3:
+            hn[count] = m
+            count += 1
+    if count == 0:
+        return False
+    covered = _union_factor(center, nx, hp, hn, count, sn, levels, lcount, nxt, sa, sb)
+    return covered >= unocc * (1.0 - COVER_REL)
+
+
+@njit(cache=True)
+def _covered_block(s, e, corners, centers, cnormal, sources, snormal, starts, occ, opolys, onormal, tol, max_union,
+                   out):
+    """Squares s..e-1 of :func:`covered_squares`."""
+    ms = opolys.shape[1]
+    ns = sources.shape[1]
+    # a fused polygon is the source cut by up to four cones over a slab-cut occluder (ms + 2
+    # vertices, + 2 more where a corner's own slab cuts it again)
+    a, b, s1, s2, hp, hn, levels, lcount, nxt, sa, sb = union_scratch(ns, 4 * (ms + 4), max_union)
+    slab_a = np.empty((ms + 3, 3))
+    slab_b = np.empty((ms + 3, 3))
+    for c in range(s, e):
+        out[c] = _square_covered(corners[c], centers[c], cnormal[c], sources[c], snormal[c], occ, starts[c],
+                                 starts[c + 1], opolys, onormal, tol, max_union, a, b, s1, s2, hp, hn, levels,
+                                 lcount, nxt, sa, sb, slab_a, slab_b)
+
+
+@njit(cache=True, parallel=True)
+def covered_squares(corners, centers, cnormal, sources, snormal, starts, occ, opolys, onormal, tol, max_union):
+    """(c,) bool: receiver square c (corners (c, 4, 3), centres (c, 3), normals (c, 3)) is hidden
+    from its source (sources (c, ns, 3), snormal (c, 3)) by the union of its possible occluders
+    ``opolys[occ[starts[c]:starts[c + 1]]]`` (:func:`_square_covered`). False where unsure."""
+    c = corners.shape[0]
+    out = np.zeros(c, np.bool_)
+    n_blocks = (c + _GROUP_BLOCK - 1) // _GROUP_BLOCK
+    for blk in prange(n_blocks):
+        _covered_block(blk * _GROUP_BLOCK, min(c, (blk + 1) * _GROUP_BLOCK), corners, centers, cnormal, sources,
+                       snormal, starts, occ, opolys, onormal, tol, max_union, out)
+    return out
 
 
 @njit(cache=True, inline="always")
