@@ -88,7 +88,7 @@ def write_scene(path: Path, n_boxes: int, seed: int = 0) -> Path:
     return path
 
 
-def measure(path: str, preset: str) -> dict:
+def measure(path: str, preset: str, method: str = "auto") -> dict:
     """Solve once (no cache) and report rows, B error, energy and timings."""
     import time
     import warnings
@@ -100,11 +100,12 @@ def measure(path: str, preset: str) -> dict:
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        solution = radiosity.solve(scene, preset=preset, cache=False)
+        solution = radiosity.solve(scene, preset=preset, cache=False, method=method)
     wall = time.perf_counter() - t0
     cut = solution.scene
     active = ~_inactive(cut)
-    rows = np.asarray(solution.F.sum(axis=1)).ravel()[active]
+    # F @ 1, not F.sum: a hierarchical solution's F is a LinearOperator over its leaves
+    rows = np.asarray(solution.F @ np.ones(cut.n_patches)).ravel()[active]
     e = solution.energy
     expected = cut.emission[active, 0] / (1 - cut.reflectance[active, 0])
     b = solution.radiosity[active, 0] / expected - 1
@@ -113,8 +114,8 @@ def measure(path: str, preset: str) -> dict:
             "B_err_area_mean": float(np.average(abs(b), weights=cut.patch_area[active])),
             "escaped_share": float(e["escaped"][0] / e["emitted"][0]), "seconds": wall,
             "timings": {k: round(v, 2) for k, v in solution.timings.items()},
-            "exact_pairs": int(solution.fill.n_exact_pairs), "traced_pairs": int(solution.fill.n_traced_pairs),
-            "rays": int(solution.fill.n_rays)}
+            "method": solution.summary().get("method"),
+            **{name: int(getattr(solution.fill, f"n_{name}", 0) or 0) for name in ("exact_pairs", "traced_pairs", "rays")}}
 
 
 def main() -> None:
@@ -125,7 +126,8 @@ def main() -> None:
     ap.add_argument("--write", type=Path, help="write the OBJ there and stop")
     ap.add_argument("--baseline", type=Path, help="folder holding an older radiosity package to compare with")
     ap.add_argument("--repeat", type=int, default=1)
-    ap.add_argument("--measure", nargs=2, metavar=("OBJ", "PRESET"), help=argparse.SUPPRESS)
+    ap.add_argument("--method", choices=("auto", "uniform", "hierarchical"), default="auto")
+    ap.add_argument("--measure", nargs=3, metavar=("OBJ", "PRESET", "METHOD"), help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.measure:
         print(json.dumps(measure(*args.measure)))
@@ -141,7 +143,7 @@ def main() -> None:
         for _ in range(args.repeat):
             for label, tree in trees.items():  # alternate, so both see the same load
                 env = dict(os.environ, PYTHONPATH=str(tree))
-                out = subprocess.run([sys.executable, __file__, "--measure", str(path), preset], env=env,
+                out = subprocess.run([sys.executable, __file__, "--measure", str(path), preset, args.method], env=env,
                                      capture_output=True, text=True, check=True, cwd=tree)
                 r = json.loads(out.stdout.strip().splitlines()[-1]) | {"code": label}
                 results.append(r)
