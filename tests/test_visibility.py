@@ -558,3 +558,26 @@ def test_squares_covered_together_change_nothing_but_the_work(monkeypatch):
     split = vis.adaptive_hidden(i, j, rows, occ, 1e-6, penumbra_depth=4, max_depth=5)
     np.testing.assert_allclose(fused, split, rtol=0, atol=1e-7)
     assert 0 < fused[0] < 1 and fused_rows < vis.n_exact_rows / 2
+
+
+def test_squares_in_chunks_of_pairs_give_the_same_bits(monkeypatch):
+    """The adaptive squares run over chunks of pairs (memory: every square carries its pair's
+    occluder list); a pair's squares do not depend on the others', so any chunking gives the
+    same hidden factors bit for bit."""
+    from radiosity.visibility import _pairs
+
+    quads, groups = boxes_scene()
+    vis = make_vis(quads, groups)
+    i, j = all_pairs(len(quads))
+    i, j = _facing(quads, vis.normals, i, j)
+    status, rows, occ = vis.classify(i, j)
+    part = np.flatnonzero(status == MAYBE)[::5]
+    local = np.full(len(i), -1)
+    local[part] = np.arange(len(part))
+    keep = local[rows] >= 0
+    args = (i[part], j[part], local[rows[keep]], occ[keep], 1e-6)
+    whole = vis.adaptive_hidden(*args, penumbra_depth=2, max_depth=3)
+    monkeypatch.setattr(_pairs, "CHUNK_SQUARE_PAIRS", 7)
+    chunked = vis.adaptive_hidden(*args, penumbra_depth=2, max_depth=3)
+    assert len(part) > 50 and whole.max() > 0
+    assert whole.tobytes() == chunked.tobytes()

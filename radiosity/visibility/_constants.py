@@ -32,6 +32,12 @@ CHUNK_CLASSIFY = 262_144
 # Exact-shadow rows (receiver point, source, occluder) per numpy chunk.
 CHUNK_SHADOWS = 100_000
 
+# Pairs' possible occluders (list entries, plus one a pair) per call of the adaptive squares:
+# every square of a level carries its pair's list, up to ~5,000 squares a pair behind 80
+# occluders, so View3D's 398-surface hall at the defaults, all 3,475 partly occluded pairs in
+# one call, held 24 GB when the OOM killer stopped it. About 1 GB at most a chunk.
+CHUNK_SQUARE_PAIRS = 4_096
+
 # Most hidden polygons at one receiver point united by the compiled kernels (inclusion-exclusion
 # up to _exact_kernel.IE_MAX_POLYGONS, then the sum over the union's boundary, n^2 edge tests);
 # more go to shapely. 10 while inclusion-exclusion did it all: 12-sided concentric prisms sent

@@ -35,7 +35,7 @@ from ..geometry import centroids_and_areas, polygon_normals
 from ..formfactors import gauss_legendre_01, patch_points, square_cell_corners, square_cell_points
 from . import _occluders
 from ._constants import (CAPPED_RTOL_STEP, CELL_FALLBACK_ATOL, CELL_RETRY_POINTS, CHUNK_CELL_PAIRS, CHUNK_CLASSIFY,
-                         CHUNK_SHADOWS, CHUNK_TRIPLES, KINK_BAND, MAX_ROOT_CELLS, MAX_UNION, MAX_UNION_CELLS, PLANE_REL,
+                         CHUNK_SHADOWS, CHUNK_SQUARE_PAIRS, CHUNK_TRIPLES, KINK_BAND, MAX_ROOT_CELLS, MAX_UNION, MAX_UNION_CELLS, PLANE_REL,
                          RAY_TFAR_SHORT, RECEIVE_SMALLER_WIDTHS, SATURATED_REL, SHADOW_MAX_DEPTH, WEIGHT_FLOOR_REL)
 from ._exact import hidden_factors, point_factors
 from ._occluders import FREE, FULL, MAYBE, build_occluders
@@ -507,9 +507,22 @@ class Visibility:
         if not m:
             return hidden
         atol = np.broadcast_to(np.asarray(atol, dtype=float), (m,))
+        starts, occ_sorted = _occluder_lists(rows, occ, m)
+        # pairs in chunks of about CHUNK_SQUARE_PAIRS list entries (memory); each pair's squares
+        # do not depend on the others', so the chunks give the same factors bit for bit
+        weight = np.cumsum(np.diff(starts) + 1)
+        edges = np.r_[0, np.flatnonzero(np.diff(weight // CHUNK_SQUARE_PAIRS)) + 1, m]
+        for s, e in zip(edges[:-1], edges[1:]):
+            lists = _subset_lists(starts, occ_sorted, np.arange(s, e))
+            hidden[s:e] = self._adaptive_chunk(i[s:e], j[s:e], lists, atol[s:e], order, max_depth, penumbra_depth)
+        return hidden
+
+    def _adaptive_chunk(self, i, j, pair_lists, atol, order, max_depth, penumbra_depth) -> np.ndarray:
+        """:meth:`adaptive_hidden` of pairs (i, j) with one occluder list each, ``pair_lists``."""
+        m = len(i)
+        hidden = np.zeros(m)
         pair, corner, size, share = self._root_cells(i)
-        lists, may_cross = self._square_occluders(i, j, _subset_lists(*_occluder_lists(rows, occ, m), pair), pair,
-                                                  corner, size)
+        lists, may_cross = self._square_occluders(i, j, _subset_lists(*pair_lists, pair), pair, corner, size)
         coarse, area, state, _ = self._cell_hidden(i, j, lists, pair, corner, size, order)
         patch_area = np.bincount(pair, weights=area, minlength=m)  # the root cells tile the patches
         offsets = np.array([[0.0, 0.0], [0.5, 0.0], [0.0, 0.5], [0.5, 0.5]])
