@@ -216,15 +216,9 @@ def parts_to_csr(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]], n: int)
     _cumulate(indptr)
     fill = indptr[:-1].copy()
     for i, j, v in parts:
-        if len(i) < PARALLEL_MIN:
-            _place_rows(i, j, v, fill, indices, data, 1)
-            continue
-        # two passes: entries into buckets of BUCKET_ROWS rows (few write streams), then each
-        # bucket into its rows, buckets in parallel (the writes of one stay in a few cache
-        # lines). One pass scattering to every row took 45% of the open 32 x 32 plates' fill.
-        bucket_start = np.zeros((n + BUCKET_ROWS - 1) // BUCKET_ROWS + 1, np.int64)
-        rows, cols, values = _bucket_entries(i, j, v, bucket_start)
-        _place_buckets(rows, cols, values, bucket_start, fill, indices, data)
+        # rows split among the threads, each scanning every entry for its own rows
+        spans = _numba.get_num_threads() if len(i) >= PARALLEL_MIN else 1
+        _place_rows(i, j, v, fill, indices, data, spans)
     if not _sort_rows(indptr, indices, data):
         return None
     F = sp.csr_matrix((data, indices, indptr), shape=(n, n))
@@ -255,38 +249,6 @@ def _place_rows(i, j, v, fill, indices, data, spans):
             if lo <= r < hi:
                 indices[fill[r]], data[fill[r]] = j[t], v[t]
                 fill[r] += 1
-
-
-# Rows per bucket of parts_to_csr's first pass.
-BUCKET_ROWS = 32
-
-
-def _bucket_entries(i, j, v, bucket_start):
-    """Entries (i, j, v) grouped by bucket of BUCKET_ROWS rows, in input order within a bucket;
-    bucket_start (n_buckets + 1,) zeros on entry, the buckets' offsets on return."""
-    n_buckets = len(bucket_start) - 1
-    for t in range(len(i)):
-        bucket_start[i[t] // BUCKET_ROWS + 1] += 1
-    for b in range(n_buckets):
-        bucket_start[b + 1] += bucket_start[b]
-    slot = bucket_start[:-1].copy()
-    rows = np.empty(len(i), np.int32)
-    cols = np.empty(len(i), np.int32)
-    values = np.empty(len(i))
-    for t in range(len(i)):
-        b = i[t] // BUCKET_ROWS
-        rows[slot[b]], cols[slot[b]], values[slot[b]] = i[t], j[t], v[t]
-        slot[b] += 1
-    return rows, cols, values
-
-
-def _place_buckets(rows, cols, values, bucket_start, fill, indices, data):
-    """:func:`_place_rows` of bucketed entries (:func:`_bucket_entries`), a task per bucket."""
-    for b in _prange(len(bucket_start) - 1):
-        for t in range(bucket_start[b], bucket_start[b + 1]):
-            r = rows[t]
-            indices[fill[r]], data[fill[r]] = cols[t], values[t]
-            fill[r] += 1
 
 
 def _sort_rows(indptr, indices, data):
@@ -964,8 +926,6 @@ _ascending = _numba.njit(cache=True)(_ascending)
 _count_rows = _numba.njit(cache=True)(_count_rows)
 _cumulate = _numba.njit(cache=True)(_cumulate)
 _place_rows = _TwoWays(_place_rows, lambda *a: len(a[0]) if a[6] > 1 else 0)
-_bucket_entries = _numba.njit(cache=True)(_bucket_entries)
-_place_buckets = _TwoWays(_place_buckets, lambda *a: len(a[0]))
 _mirror_value = _numba.njit(cache=True, inline="always")(_mirror_value)
 _count_kept = _TwoWays(_count_kept, lambda *a: len(a[1]))
 _write_mirrored = _TwoWays(_write_mirrored, lambda *a: len(a[1]))
