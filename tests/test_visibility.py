@@ -476,22 +476,28 @@ def test_a_wall_of_two_surfaces_hides_what_it_hides_as_one():
     assert vis.occluders.n_occluders == 2
 
 
+def _boxes_partly_occluded(step: int):
+    """The boxes scene's Visibility and the arguments of ``adaptive_hidden`` (receivers,
+    sources, occluder rows, tolerance 1e-6) for every ``step``-th partly occluded facing pair."""
+    quads, groups = boxes_scene()
+    vis = make_vis(quads, groups)
+    i, j = all_pairs(len(quads))
+    i, j = _facing(quads, vis.normals, i, j)
+    status, rows, occ = vis.classify(i, j)
+    part = np.flatnonzero(status == MAYBE)[::step]
+    local = np.full(len(i), -1)
+    local[part] = np.arange(len(part))
+    keep = local[rows] >= 0
+    return vis, (i[part], j[part], local[rows[keep]], occ[keep], 1e-6)
+
+
 def test_squares_own_occluders_change_nothing_but_the_work(monkeypatch):
     """Each adaptive square keeps only the occluders of its parent that reach it (or one that
     hides it all): the hidden factors are those of squares that test every occluder of the
     pair, to rounding, on the boxes scene's partly occluded pairs."""
     from radiosity.visibility._pairs import Visibility
 
-    quads, groups = boxes_scene()
-    vis = make_vis(quads, groups)
-    i, j = all_pairs(len(quads))
-    i, j = _facing(quads, vis.normals, i, j)
-    status, rows, occ = vis.classify(i, j)
-    part = np.flatnonzero(status == MAYBE)[::7]
-    local = np.full(len(i), -1)
-    local[part] = np.arange(len(part))
-    keep = local[rows] >= 0
-    args = (i[part], j[part], local[rows[keep]], occ[keep], 1e-6)
+    vis, args = _boxes_partly_occluded(7)
     own = vis.adaptive_hidden(*args, penumbra_depth=2, max_depth=3)
     whole = Visibility._square_occluders
 
@@ -500,7 +506,7 @@ def test_squares_own_occluders_change_nothing_but_the_work(monkeypatch):
 
     monkeypatch.setattr(Visibility, "_square_occluders", every_occluder)
     reference = vis.adaptive_hidden(*args, penumbra_depth=2, max_depth=3)
-    assert len(part) > 50 and reference.max() > 0
+    assert len(args[0]) > 50 and reference.max() > 0
     np.testing.assert_allclose(own, reference, rtol=1e-12, atol=1e-15)
 
 
@@ -566,18 +572,9 @@ def test_squares_in_chunks_of_pairs_give_the_same_bits(monkeypatch):
     same hidden factors bit for bit."""
     from radiosity.visibility import _pairs
 
-    quads, groups = boxes_scene()
-    vis = make_vis(quads, groups)
-    i, j = all_pairs(len(quads))
-    i, j = _facing(quads, vis.normals, i, j)
-    status, rows, occ = vis.classify(i, j)
-    part = np.flatnonzero(status == MAYBE)[::5]
-    local = np.full(len(i), -1)
-    local[part] = np.arange(len(part))
-    keep = local[rows] >= 0
-    args = (i[part], j[part], local[rows[keep]], occ[keep], 1e-6)
+    vis, args = _boxes_partly_occluded(5)
     whole = vis.adaptive_hidden(*args, penumbra_depth=2, max_depth=3)
     monkeypatch.setattr(_pairs, "CHUNK_SQUARE_PAIRS", 7)
     chunked = vis.adaptive_hidden(*args, penumbra_depth=2, max_depth=3)
-    assert len(part) > 50 and whole.max() > 0
+    assert len(args[0]) > 50 and whole.max() > 0
     assert whole.tobytes() == chunked.tobytes()
