@@ -36,7 +36,8 @@ from ..formfactors import gauss_legendre_01, patch_points, square_cell_corners, 
 from . import _occluders
 from ._constants import (CAPPED_RTOL_STEP, CELL_FALLBACK_ATOL, CELL_RETRY_POINTS, CHUNK_CELL_PAIRS, CHUNK_CLASSIFY,
                          CHUNK_SHADOWS, CHUNK_SQUARE_PAIRS, CHUNK_TRIPLES, KINK_BAND, MAX_ROOT_CELLS, MAX_UNION,
-                         MAX_UNION_CELLS, PLANE_REL, RAY_TFAR_SHORT, RECEIVE_SMALLER_WIDTHS, SATURATED_REL, SHADOW_MAX_DEPTH, WEIGHT_FLOOR_REL)
+                         MAX_UNION_CELLS, PLANE_REL, RAY_TFAR_SHORT, RECEIVE_SMALLER_WIDTHS, SATURATED_REL,
+                         SHADOW_MAX_DEPTH, WEIGHT_FLOOR_REL)
 from ._exact import hidden_factors, point_factors
 from ._occluders import FREE, FULL, MAYBE, build_occluders
 
