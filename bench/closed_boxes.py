@@ -115,7 +115,8 @@ def measure(path: str, preset: str, method: str = "auto") -> dict:
             "escaped_share": float(e["escaped"][0] / e["emitted"][0]), "seconds": wall,
             "timings": {k: round(v, 2) for k, v in solution.timings.items()},
             "method": solution.summary().get("method"),
-            **{name: int(getattr(solution.fill, f"n_{name}", 0) or 0) for name in ("exact_pairs", "traced_pairs", "rays")}}
+            **{name: int(getattr(solution.fill, f"n_{name}", 0) or 0)
+               for name in ("exact_pairs", "traced_pairs", "rays")}}
 
 
 def main() -> None:
