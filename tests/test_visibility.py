@@ -10,6 +10,7 @@ from helpers import all_pairs, boxes_scene, corner_point_factor, make_vis, rect
 pytest.importorskip("embreex")
 
 from radiosity import _tol  # noqa: E402
+from radiosity.geometry import centroids_and_areas  # noqa: E402
 from radiosity.visibility import FREE, FULL, MAYBE  # noqa: E402
 from radiosity.visibility._embree import EmbreeOccluder  # noqa: E402
 from radiosity.visibility._occluders import build_occluders, classify_rows, classify_rows_numpy  # noqa: E402
@@ -564,6 +565,24 @@ def test_squares_covered_together_change_nothing_but_the_work(monkeypatch):
     split = vis.adaptive_hidden(i, j, rows, occ, 1e-6, penumbra_depth=4, max_depth=5)
     np.testing.assert_allclose(fused, split, rtol=0, atol=1e-7)
     assert 0 < fused[0] < 1 and fused_rows < vis.n_exact_rows / 2
+
+
+@pytest.mark.parametrize("penumbra_depth", [0, 4])
+def test_a_receiver_the_slats_hide_together_gets_nothing(penumbra_depth):
+    """The two staggered slats together hide the whole source from the whole receiver: the
+    hidden part is the pair's unoccluded factor (area kernel, 1e-10) within the tolerance, with
+    or without the penumbra levels, since the squares they cover take that factor exactly."""
+    from radiosity.formfactors import pair_factors
+
+    quads = np.asarray(_staggered_slats(0.4), float)
+    vis = make_vis(quads)
+    i, j = np.array([1]), np.array([0])
+    status, rows, occ = vis.classify(i, j)
+    assert status.tolist() == [MAYBE]
+    centroid, area = centroids_and_areas(quads)
+    unoccluded = pair_factors(quads, vis.normals, centroid, area, i, j, rtol=1e-10)[0]
+    hidden = vis.adaptive_hidden(i, j, rows, occ, 1e-6, penumbra_depth=penumbra_depth, max_depth=5)[0]
+    assert abs(unoccluded - hidden) <= 1e-6 * unoccluded
 
 
 def test_squares_in_chunks_of_pairs_give_the_same_bits(monkeypatch):

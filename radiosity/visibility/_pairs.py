@@ -32,7 +32,7 @@ from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from .. import _tol
 from ..geometry import centroids_and_areas, polygon_normals
-from ..formfactors import gauss_legendre_01, patch_points, square_cell_corners, square_cell_points
+from ..formfactors import gauss_legendre_01, pair_factors, patch_points, square_cell_corners, square_cell_points
 from . import _occluders
 from ._constants import (CAPPED_RTOL_STEP, CELL_FALLBACK_ATOL, CELL_RETRY_POINTS, CHUNK_CELL_PAIRS, CHUNK_CLASSIFY,
                          CHUNK_SHADOWS, CHUNK_SQUARE_PAIRS, CHUNK_TRIPLES, KINK_BAND, MAX_ROOT_CELLS, MAX_UNION,
@@ -540,21 +540,26 @@ class Visibility:
             # across a shadow's edge keeps a fixed relative error however small it gets, so an
             # area share split every such cell to max_depth (the Cornell box at fine: 787 s,
             # not 24 s); by side, the cells along an edge of the patch's length sum to about atol
-            done = np.abs(fine - coarse) <= atol[pair] * patch_area[pair] * share
-            if depth < min(penumbra_depth, max_depth - 1):
+            allowed = atol[pair] * patch_area[pair] * share
+            done = np.abs(fine - coarse) <= allowed
+            penumbra = depth < min(penumbra_depth, max_depth - 1)
+            agree = state & np.bitwise_and.reduce(child_state.reshape(-1, 4), axis=1)
+            # a square that its occluders together hide (behind a wall of many surfaces no one
+            # of them hides it: a roof piece of View3D's hall behind 65+ took 6 minutes) hides its
+            # whole unoccluded factor, which the area kernel gives to any tolerance where its
+            # points' rule may not converge (near the source: that piece split half its squares
+            # at every level). A square that one occluder hides keeps its points: that test
+            # counts crossings on an edge as inside, and a square touching the occluder's plane
+            # there (two faces of a box) was found hidden where its points are lit.
+            whole = np.zeros(len(pair), bool)
+            dark = np.flatnonzero(may_cross & ((agree & 2) != 0))
+            if len(dark):
+                whole[dark] = self._squares_covered(i, j, lists, dark, pair[dark], corner[dark], size[dark])
+            if penumbra:
                 # points all lit (or all in shadow) agree whatever passes between them: such a
                 # cell is done only if no occluder can shadow part of it
-                children = child_state.reshape(-1, 4)
-                agree = state & np.bitwise_and.reduce(children, axis=1)
                 same = agree != 0
-                # ... unless the occluders together hide all of it: behind a wall of many
-                # surfaces no one occluder hides a square, and each was split to the deepest level
-                # (a floor piece of View3D's hall behind 65+ of them took 6 minutes)
-                dark = np.flatnonzero(done & may_cross & ((agree & 2) != 0))
-                covered = np.zeros(len(done), bool)
-                if len(dark):
-                    covered[dark] = self._squares_covered(i, j, lists, dark, pair[dark], corner[dark], size[dark])
-                done &= ~(same & may_cross) | covered
+                done &= ~(same & may_cross)
                 # a kink of the hidden factor between the outermost points and the cell's side
                 # (where a shadow starts, or two overlap) passes unseen too: both rules see one
                 # smooth branch (a box's shadow on a cube face: 1.8e-5 of its factor, at every
@@ -566,8 +571,12 @@ class Visibility:
                     at = self._corner_hidden(i, j, lists, check, pair[check], corner[check], size[check])
                     miss = np.abs(at - _corner_extrapolation(child_values.reshape(-1, 4, order * order)[check],
                                                              order)).max(axis=1)
-                    allowed = atol[pair[check]] * patch_area[pair[check]] * share[check]
-                    done[check] = miss * KINK_BAND * area[check] <= allowed
+                    done[check] = miss * KINK_BAND * area[check] <= allowed[check]
+            whole = np.flatnonzero(whole)
+            if len(whole):
+                fine[whole] = self._squares_unoccluded(i, j, pair[whole], corner[whole], size[whole], fine[whole],
+                                                       allowed[whole])
+                done[whole] = True
             if depth == max_depth - 1:
                 done[:] = True
             np.add.at(hidden, pair[done], fine[done])
@@ -720,6 +729,23 @@ class Visibility:
         return covered_squares(np.ascontiguousarray(corners), corners.mean(axis=1), self.normals[i[pair]],
                                self.quads[j[pair]], self.normals[j[pair]], starts, cell_occ, o.polys, o.normal,
                                PLANE_REL * self.scale, MAX_UNION)
+
+    def _squares_unoccluded(self, i, j, pair, corner, size, estimate, allowed) -> np.ndarray:
+        """(c,) unoccluded factor of cells (pair, corner, size) to their sources, times the
+        cells' areas, each within about ``allowed`` of it (``estimate``: a first value of it).
+
+        One call of the area kernel per decade of relative tolerance, from 1e-3 to 1e-9."""
+        corners = square_cell_corners(self.quads[i[pair]], corner[:, 0], corner[:, 1], size)
+        centroid, area = centroids_and_areas(corners)
+        ratio = allowed / np.maximum(np.abs(estimate), np.finfo(float).tiny)
+        decade = np.clip(np.floor(np.log10(np.maximum(ratio, 1e-300))), -9, -3)
+        out = np.zeros(len(pair))
+        for d in np.unique(decade):
+            sel = np.flatnonzero(decade == d)
+            out[sel] = pair_factors(corners[sel], self.normals[i[pair[sel]]], centroid[sel], area[sel],
+                                    np.arange(len(sel)), np.arange(len(sel)), rtol=10.0 ** d,
+                                    sources=self.quads[j[pair[sel]]])
+        return out * area
 
     def _points_hidden(self, pts, i, j, lists, p):
         """Unoccluded and hidden factors (c, q) at receiver points ``pts`` (c, q, 3) of pairs
