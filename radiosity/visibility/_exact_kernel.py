@@ -184,33 +184,45 @@ def _inside_slab(occ, ms, px, py, pz, off, dx):
     return lo > 1e-12 * hmax and hi < dx - 1e-12 * hmax
 
 
+@njit(cache=True, inline="always")
+def _facing_plane(x, src, ns, sn):
+    """The source src[:ns]'s plane as seen from x: (px, py, pz) its unit normal turned towards
+    x, off its offset (p . v + off is v's height above the plane on x's side) and x's height."""
+    cx, cy, cz = _mean_vertex(src, ns)
+    side = (x[0] - cx) * sn[0] + (x[1] - cy) * sn[1] + (x[2] - cz) * sn[2]
+    flip = -1.0 if side < 0 else 1.0
+    px, py, pz = sn[0] * flip, sn[1] * flip, sn[2] * flip
+    return px, py, pz, -(px * cx + py * cy + pz * cz), abs(side)
+
+
+@njit(cache=True, inline="always")
+def _clip_to_slab(occ, ms, a, b, px, py, pz, off, depth):
+    """occ[:ms] cut to the slab 0 <= p . v + off <= depth, into b (a: scratch); its vertex count.
+    A polygon well inside it is copied as it is (:func:`_inside_slab`)."""
+    if _inside_slab(occ, ms, px, py, pz, off, depth):
+        for v in range(ms):
+            b[v, 0] = occ[v, 0]
+            b[v, 1] = occ[v, 1]
+            b[v, 2] = occ[v, 2]
+        return ms
+    n1 = _clip(occ, ms, a, px, py, pz, off)
+    return _clip(a, n1, b, -px, -py, -pz, depth - off)
+
+
 @njit(cache=True)
 def _hidden_polygon(xr, src, ns, sn, occ, ms, on, tol, a, b, s1, s2):
     """Part of the source src[:ns] hidden from xr by the convex occluder occ[:ms], into s1.
 
     Returns its vertex count (0: nothing hidden). a, b: scratch (ms + 3, 3); s1, s2: (ns + ms + 3, 3).
     """
-    cx, cy, cz = _mean_vertex(src, ns)
-    side = (xr[0] - cx) * sn[0] + (xr[1] - cy) * sn[1] + (xr[2] - cz) * sn[2]
-    flip = -1.0 if side < 0 else 1.0
-    px, py, pz = sn[0] * flip, sn[1] * flip, sn[2] * flip
-    dx = abs(side)
+    px, py, pz, off, dx = _facing_plane(xr, src, ns, sn)
     if dx <= tol:
         return 0
     # apex in the occluder's plane: the cone is flat
     ox, oy, oz = _mean_vertex(occ, ms)
     if abs((xr[0] - ox) * on[0] + (xr[1] - oy) * on[1] + (xr[2] - oz) * on[2]) <= tol:
         return 0
-    off = -(px * cx + py * cy + pz * cz)
-    if _inside_slab(occ, ms, px, py, pz, off, dx):
-        for v in range(ms):  # the clipping below would copy it
-            b[v, 0] = occ[v, 0]
-            b[v, 1] = occ[v, 1]
-            b[v, 2] = occ[v, 2]
-        n2 = ms
-    else:
-        n1 = _clip(occ, ms, a, px, py, pz, off)
-        n2 = _clip(a, n1, b, -px, -py, -pz, dx - off)
+    n2 = _clip_to_slab(occ, ms, a, b, px, py, pz, off, dx)
     if n2 < 3 or _thinner_than(b, n2, tol):
         # An occluder that only touches the slab (a cap sharing the receiver's edge, clipped
         # at x's own depth) leaves a sliver of round-off width: its cone from x is flat, but
@@ -777,11 +789,7 @@ def _square_covered(xc, center, nx, src, sn, occ, t0, t1, opolys, onormal, tol, 
     """
     ns = src.shape[0]
     ms = opolys.shape[1]
-    cx, cy, cz = _mean_vertex(src, ns)
-    side = (center[0] - cx) * sn[0] + (center[1] - cy) * sn[1] + (center[2] - cz) * sn[2]
-    flip = -1.0 if side < 0 else 1.0
-    px, py, pz = sn[0] * flip, sn[1] * flip, sn[2] * flip
-    off = -(px * cx + py * cy + pz * cz)
+    px, py, pz, off, _ = _facing_plane(center, src, ns, sn)
     dmin = np.inf
     for c in range(xc.shape[0]):
         dmin = min(dmin, px * xc[c, 0] + py * xc[c, 1] + pz * xc[c, 2] + off)
@@ -793,8 +801,7 @@ def _square_covered(xc, center, nx, src, sn, occ, t0, t1, opolys, onormal, tol, 
     count = 0
     for t in range(t0, t1):
         k = occ[t]
-        n1 = _clip(opolys[k], ms, slab_a, px, py, pz, off)
-        n2 = _clip(slab_a, n1, slab_b, -px, -py, -pz, dmin - off)
+        n2 = _clip_to_slab(opolys[k], ms, slab_a, slab_b, px, py, pz, off, dmin)
         if n2 < 3:
             continue
         if count >= max_union:
