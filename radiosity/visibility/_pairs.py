@@ -499,7 +499,9 @@ class Visibility:
         so the fill asks for it only at view_factors' tolerances. To the same depth, a cell is
         split where the hidden factor at one of its corners misses the polynomial through its
         children's points (:func:`_corner_extrapolation`): a kink between the outermost points
-        and the cell's side.
+        and the cell's side. At any depth, a square whose points are all in full shadow and
+        that its occluders together hide (:meth:`_squares_covered`) stops there, with its
+        whole unoccluded factor from the area kernel (:meth:`_squares_unoccluded`).
         """
         i = np.ascontiguousarray(i, dtype=np.int64)
         j = np.ascontiguousarray(j, dtype=np.int64)
