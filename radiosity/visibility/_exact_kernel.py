@@ -388,6 +388,8 @@ def _union_factor_edges(x, nx, hp, hn, n_polys, sn, poly, count, iv):
             if abs(dx) + abs(dy) + abs(dz) <= eps:
                 continue
             n_iv = _covered_intervals(poly, count, n_polys, k, e, eps, iv, inward, box)
+            if n_iv < 0:
+                continue
             # walk the uncovered pieces of the edge, intervals in order of their start
             for a in range(1, n_iv):
                 lo, hi = iv[a, 0], iv[a, 1]
@@ -452,8 +454,9 @@ def _inward(poly, n, f, sn):
 @njit(cache=True)
 def _covered_intervals(poly, count, n_polys, k, e, eps, iv, inward, box):
     """Parameter intervals of edge e of polygon k lying inside the other polygons, into iv; their
-    count. ``inward``, ``box``: :func:`_edge_frames`. A polygon whose box misses the edge's
-    (padded by the on-line margin) holds none of it."""
+    count, or -1 as soon as one polygon holds all of it. ``inward``, ``box``:
+    :func:`_edge_frames`. A polygon whose box misses the edge's (padded by the on-line margin)
+    holds none of it."""
     n = count[k]
     e2 = e + 1 if e + 1 < n else 0
     p = poly[k, e]
@@ -493,6 +496,8 @@ def _covered_intervals(poly, count, n_polys, k, e, eps, iv, inward, box):
             if lo >= hi:
                 break
         if hi > lo:
+            if lo <= 0.0 and hi >= 1.0:
+                return -1  # inside polygon m all along: nothing of it is on the union's boundary
             iv[n_iv, 0] = lo
             iv[n_iv, 1] = hi
             n_iv += 1
