@@ -376,6 +376,16 @@ def _union_factor_edges(x, nx, hp, hn, n_polys, sn, poly, count, iv):
         for v in range(count[k]):
             extent = max(extent, abs(poly[k, v, 0] - x[0]) + abs(poly[k, v, 1] - x[1]) + abs(poly[k, v, 2] - x[2]))
     eps = _ON_LINE_REL * extent
+    for k in range(n_polys):
+        # a polygon that only touches x's horizon (its factor round-off: 4e-16) is left a sliver
+        # along the horizon line, whose two long edges, each with a large term, need not cancel
+        # once other polygons cover part of one (View3D's hall: a point's union 4.3e-6 where
+        # the truth is 2.2e-10, and pair 2064's hidden part 0.2% of its factor short)
+        high = 0.0
+        for v in range(count[k]):
+            high = max(high, nx[0] * poly[k, v, 0] + nx[1] * poly[k, v, 1] + nx[2] * poly[k, v, 2] + d)
+        if high <= eps:
+            count[k] = 0
     inward, box = _edge_frames(poly, count, n_polys, sn)
     total = 0.0
     for k in range(n_polys):
