@@ -197,7 +197,7 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
                                      method=options.solver, rtol=options.solver_rtol)
     timings = dict(prepared.timings)
     timings["solve"] = time.perf_counter() - t0
-    balance = energy_balance(F, cut.patch_area, cut.reflectance, cut.emission, radiosity)
+    balance = _balance(F, cut, radiosity)
     gaining = gaining_patches(filled, cut.patch_area, radiosity, cut.patch_object, cut.objects)
     gained = gained_power(filled, cut.patch_area, radiosity) if n_bounded else None
     note = gain_note(balance, gaining, options.formfactor_rtol + options.visibility_atol, gained=gained)
@@ -251,7 +251,7 @@ def _solve_out_of_core(cut, options, refusal: MemoryBudgetError, timings: dict[s
     timings["solve"] = time.perf_counter() - t0
     report = SolverReport(f"{info['method']} over the shards", [info["iterations"]] * 3, info["residual"],
                           [None] * 3)
-    balance = energy_balance(F, cut.patch_area, cut.reflectance, cut.emission, radiosity)
+    balance = _balance(F, cut, radiosity)
     storage = {"where": "out of core", "shards": F.n_blocks, "pairs_per_block": pairs,
                "passes": info["passes"], "estimate_in_memory": _memory.format_bytes(_memory.fill_bytes(cut.n_patches)),
                "budget": f"{_memory.format_bytes(budget)} ({source})",
@@ -297,7 +297,7 @@ def _solve_hierarchical(scene: Scene, options: Options) -> Solution:
 
     result = solve_hierarchical(scene, options)
     leaves = result.scene
-    balance = energy_balance(result.F, leaves.patch_area, leaves.reflectance, leaves.emission, result.radiosity)
+    balance = _balance(result.F, leaves, result.radiosity)
     return Solution(scene=leaves, radiosity=result.radiosity, F=result.F, options=options, timings=result.timings,
                     fill=result.stats, solver=result.report, energy=balance)
 
@@ -317,6 +317,18 @@ def _inactive(scene: Scene) -> np.ndarray:
     if hidden is None or len(hidden) != scene.n_patches:
         return scene.patch_obstruction
     return scene.patch_obstruction | hidden
+
+
+def _balance(F, scene: Scene, radiosity: np.ndarray) -> dict[str, list[float]]:
+    """:func:`energy_balance` over the patches that are there: a hidden region (under a contact)
+    neither emits into the scene nor receives. Counted, its emission went to "escaped": a closed
+    furnace room whose ceiling panel and cylinder touch the ceiling and floor reported 4.96 W of
+    its 206.4 W escaping, the covered area's emission."""
+    hidden = getattr(scene, "patch_hidden", None)
+    area = scene.patch_area
+    if hidden is not None and len(hidden) == scene.n_patches:
+        area = np.where(hidden, 0.0, area)
+    return energy_balance(F, area, scene.reflectance, scene.emission, radiosity)
 
 
 def _without(F: sp.csr_matrix, inactive: np.ndarray) -> sp.csr_matrix:

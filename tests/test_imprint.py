@@ -154,6 +154,28 @@ def test_object_radiosity_averages_over_hidden_regions_too(draft_solution):
         assert (means[name] < lit).all()  # the dark footprints pull the mean down
 
 
+def test_covered_regions_of_a_closed_furnace_send_nothing_out(tmp_path):
+    """A closed furnace room (every surface E = 1, rho = 0.5) with a block standing on its floor:
+    the floor under the block is hidden and keeps B = E, but it is not there for the room, so
+    its emission is neither emitted nor escaped. Counted, it went to "escaped": a closed room
+    reported 4.96 W of 206.4 W escaping, the covered area's emission."""
+    from helpers import axis_box
+
+    furnace = {"furnace": ((0.5, 0.5, 0.5), (1.0, 1.0, 1.0))}
+    room = write_obj(tmp_path / "room.obj", {"room": axis_box((0, 0, 0), (2, 2, 2), inward=True),
+                                             "block": axis_box((0.6, 0, 0.6), (1.4, 0.5, 1.4), inward=False)},
+                     furnace)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", radiosity.RadiosityWarning)
+        solution = radiosity.solve(radiosity.load_scene(room), preset="draft", cache=False)
+    scene = solution.scene
+    assert scene.patch_area[scene.patch_hidden].sum() == pytest.approx(2 * 0.8 * 0.8)  # floor and block bottom
+    energy = {k: np.asarray(v) for k, v in solution.energy.items()}
+    present = ~scene.patch_hidden
+    assert energy["emitted"] == pytest.approx(np.pi * scene.patch_area[present].sum(), rel=1e-12)
+    assert np.abs(energy["escaped"]).max() <= 1e-2 * energy["emitted"].max()
+
+
 # ----------------------------------------------------------------------------- small scenes
 FLOOR = np.array([[0, 0, 0], [0, 0, 2], [2, 0, 2], [2, 0, 0]], float)  # y = 0, normal +y
 
