@@ -27,6 +27,13 @@ EMISSION_MODES = ("radiance", "exitance")
 LOAD_OPTIONS = ("units", "allow_clamp", "imprint")
 
 
+# A scene whose box lies farther from the origin than this many times its size is solved moved
+# to the origin (Scene.centred): float64 coordinates of a 1 mm box 1e6 m away resolve 1.2e-10 m,
+# 1e-7 of its size and coarser than the visibility's plane tolerance (1e-9 of the scene), and
+# 10-13% of the light escaped such a closed box. Nearer, the coordinates are used as they are.
+CENTRE_BEYOND_SIZES = 100.0
+
+
 @dataclass(frozen=True, eq=False)
 class Scene:
     """A scene cut into patches, ready for the form-factor stage.
@@ -114,6 +121,23 @@ class Scene:
         """Hash of the patch geometry alone: the key of the form-factor cache."""
         digest = hashlib.sha256(np.ascontiguousarray(self.patch_quads, dtype=np.float64).tobytes())
         return digest.hexdigest()[:32]
+
+    def centred(self) -> tuple["Scene", np.ndarray]:
+        """The scene moved so that its bounding box is centred on the origin, and the offset (3,)
+        that moves it back (:meth:`moved`); the scene itself and zeros when its box lies within
+        ``CENTRE_BEYOND_SIZES`` of its sizes from the origin."""
+        if not self.n_patches:
+            return self, np.zeros(3)
+        pts = self.patch_quads.reshape(-1, 3)
+        origin = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+        if np.abs(origin).max() <= CENTRE_BEYOND_SIZES * self.scale:
+            return self, np.zeros(3)
+        return replace(self, patch_quads=self.patch_quads - origin), origin
+
+    def moved(self, offset) -> "Scene":
+        """The scene translated by ``offset`` (3,), metres."""
+        offset = np.asarray(offset, float)
+        return replace(self, patch_quads=self.patch_quads + offset) if offset.any() else self
 
     def with_materials(self, reflectance=None, emission=None) -> "Scene":
         """The same geometry with new per-patch reflectance and/or emission (cache stays valid)."""

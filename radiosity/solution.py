@@ -147,12 +147,12 @@ class Solution:
             sensor_rtol = rename_deprecated({"rtol": rtol}, "irradiance option", aliases=_SENSOR_ALIAS)["sensor_rtol"]
         if not (np.isfinite(sensor_rtol) and 0.0 <= sensor_rtol < 1.0):
             raise ValueError(f"sensor_rtol must be in [0, 1), got {sensor_rtol!r}")
+        scene, origin = self.scene.centred()  # as solve: far from the origin, digits are lost
         if self._sensors is None or not np.array_equal(self._sensors.radiosity, self.radiosity):
-            scene = self.scene
             vis = Visibility(scene.patch_quads, scene.patch_normal, scene.patch_object, scene.scale)
             self._sensors = SensorGather(scene.patch_quads, scene.patch_normal, scene.patch_object, scene.scale,
                                          self.radiosity.copy(), inner=vis.occluders)
-        return self._sensors.irradiance(points, normals, rtol=sensor_rtol)
+        return self._sensors.irradiance(points - origin, normals, rtol=sensor_rtol)
 
     def summary(self) -> dict[str, Any]:
         """Machine-readable summary (what ``summary.json`` holds)."""

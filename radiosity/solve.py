@@ -172,6 +172,13 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     options = Options.from_preset(preset, **overrides)
     if options.method not in METHODS:
         raise TypeError(f"unknown method {options.method!r}; valid: {', '.join(METHODS)}")
+    local, origin = scene.centred()  # far from the origin, coordinates lose the digits contacts need
+    solution = _solve_centred(local, options)
+    return replace(solution, scene=solution.scene.moved(origin)) if origin.any() else solution
+
+
+def _solve_centred(scene: Scene, options: Options) -> Solution:
+    """:func:`solve` of a scene near the origin."""
     if options.method == "hierarchical":
         return _solve_hierarchical(scene, options)
     t0 = time.perf_counter()
@@ -452,6 +459,7 @@ def compute_view_factors(scene: Scene, *, preset: str = "default", enforce: str 
     if enforce == "auto":  # what the model file asks for (View3D encl=1), else nothing
         enforce = "closure" if getattr(scene, "enclosure", False) else "none"
     options = _view_factor_options(preset, overrides)
+    scene, origin = scene.centred()  # far from the origin, coordinates lose the digits contacts need
     prepared = prepare(scene, options)
     cut = prepared.scene
     active = ~_inactive(cut)
@@ -468,7 +476,7 @@ def compute_view_factors(scene: Scene, *, preset: str = "default", enforce: str 
         block = block.tocoo()
         F = sp.csr_matrix((block.data, (keep[block.row], keep[block.col])), shape=F.shape)
     error = _error_estimate(cut, options, filled, F, active) if error_estimate else None
-    return ViewFactors(F, cut, enforce, settings, error)
+    return ViewFactors(F, cut.moved(origin), enforce, settings, error)
 
 
 def _error_estimate(cut: Scene, options: Options, filled: sp.csr_matrix, F: sp.csr_matrix,

@@ -11,12 +11,15 @@ error in the reason: when a fix lands they XPASS and fail, so the marker must be
 
 from __future__ import annotations
 
+import warnings
+
 import mpmath as mp
 import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
+import radiosity
 from radiosity import point_to_polygon, polygon_to_polygon
 from helpers import lambert_mp, parallel_rectangles_mp, perpendicular_rectangles_mp, polygon_area
 from helpers import mp_vector as _mp3
@@ -830,3 +833,33 @@ def test_pair_rigid_motion_scaling_and_vertex_order(seed, shift, angle, scale, r
     assert _close(f0, polygon_to_polygon(a * scale, b * scale, rtol=1e-10), 1e-9)
     assert _close(f0, polygon_to_polygon(np.roll(a, roll % len(a), axis=0), b, rtol=1e-10), 1e-9)
     assert _close(f0, polygon_to_polygon(a, b[::-1], rtol=1e-10), 1e-12)
+
+
+def _small_lit_box(tmp_path, offset: float) -> str:
+    """A closed 1 mm box (normals in) with a lamp 0.1 mm under its ceiling, moved by ``offset``
+    metres along every axis, as an OBJ (coordinates to 17 digits)."""
+    from helpers import axis_box, write_obj
+
+    shift = np.full(3, offset)
+    room = [q + shift for q in axis_box((0, 0, 0), (1e-3, 1e-3, 1e-3), inward=True)]
+    lamp = np.array([[3e-4, 9e-4, 3e-4], [7e-4, 9e-4, 3e-4], [7e-4, 9e-4, 7e-4], [3e-4, 9e-4, 7e-4]]) + shift
+    materials = {"grey": ((0.5, 0.5, 0.5), (0.0, 0.0, 0.0)), "light": ((0.0, 0.0, 0.0), (10.0, 10.0, 10.0))}
+    return write_obj(tmp_path / f"box_{offset:g}.obj", {"room": room, "lamp": [lamp]}, materials,
+                     {"room": "grey", "lamp": "light"})
+
+
+def test_a_small_box_far_from_the_origin_solves_as_at_the_origin(tmp_path):
+    """A 1 mm box 1e6 m from the origin: float64 resolves its coordinates to 1.2e-10 m, 1e-7 of its
+    size and coarser than the visibility's plane tolerance, so the lamp's back no longer hid the
+    ceiling above it and 13% of the light left the closed box. Solved moved to the origin
+    (``Scene.centred``), it keeps its light and its object means to the inputs' rounding; the
+    solution's scene is back where the input was."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", radiosity.RadiosityWarning)
+        near, far = (radiosity.solve(radiosity.load_scene(_small_lit_box(tmp_path, d)), preset="draft", cache=False)
+                     for d in (0.0, 1e6))
+    for name, value in near.object_radiosity().items():
+        np.testing.assert_allclose(far.object_radiosity()[name], value, rtol=1e-4)
+    escaped, emitted = np.asarray(far.energy["escaped"]), np.asarray(far.energy["emitted"])
+    assert np.abs(escaped).max() <= 1e-2 * emitted.max()
+    assert far.scene.patch_quads.min() > 1e6 - 1e-9
