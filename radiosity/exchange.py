@@ -157,6 +157,11 @@ class Exchange:
                 "relative": abs(residual) / scale}
 
 
+class OpenSceneError(SceneError):
+    """Rows of F fall short of 1 and no ambient takes the rest: about the scene and its matrix,
+    not the conditions."""
+
+
 def exchange(scene: Scene, *, emissivity: Condition, temperature: Condition | None = None,
              heat_flux: Condition | None = None, ambient: float | None = None,
              view_factors: sp.spmatrix | np.ndarray | None = None, enforce: str = "auto", **options) -> Exchange:
@@ -386,8 +391,9 @@ def _closed(Fa: sp.csr_matrix, scene: Scene, idx: np.ndarray, ambient: float | N
         msg = (f"the scene is open: patch {i} (object {scene.objects[scene.patch_object[i]]!r}) sends "
                f"{short[worst]:.3g} of its radiation to no patch (row sum of F {rows[worst]:.6g}; "
                f"{int((short > CLOSURE_TOL).sum())} patch(es) short of 1 by more than {CLOSURE_TOL:g}); "
-               "give an ambient temperature (K) for the surroundings they see")
-        raise SceneError(msg)
+               "give an ambient temperature (K) for the surroundings they see; if the scene is "
+               "closed and that is the matrix's error, compute it tighter or pass enforce='closure'")
+        raise OpenSceneError(msg)
     if (short < -CLOSURE_TOL).any():
         worst = int(np.argmin(short))
         i = int(idx[worst])

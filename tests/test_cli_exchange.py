@@ -69,7 +69,8 @@ def test_json_conditions_and_ambient_for_an_open_scene(tmp_path, capsys):
     # without the ambient the open scene is refused, and the message says what to give
     conditions.write_text(json.dumps({"objects": {"roof": {"emissivity": 0.9, "temperature": 310}}}))
     code = main(["exchange", obj, "--conditions", str(conditions), "-o", str(tmp_path / "out2")])
-    assert_one_line_error(capsys, code, "open", "ambient")
+    message = assert_one_line_error(capsys, code, "open", "ambient")
+    assert "roof.obj" in message and "c.json" not in message  # the scene's fault, not the conditions'
     # --ambient on the command line does it too
     assert main(["exchange", obj, "--conditions", str(conditions), "--ambient", "230",
                  "-o", str(tmp_path / "out3")]) == 0

@@ -28,7 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._errors import SceneError
-from ..exchange import exchange
+from ..exchange import OpenSceneError, exchange
 from ..io.export import atomic_path, staged_outputs
 from ..scene import bundled_scene, load_scene
 from ._common import add_scene_args
@@ -235,6 +235,8 @@ def run(args) -> int:
             kwargs.update(preset=args.preset, cache=not args.no_cache)
         try:
             ex = exchange(scene, **kwargs)
+        except OpenSceneError as exc:  # the scene's or the matrix's, not the conditions'
+            raise SceneError(f"{args.view_factors or args.scene}: {exc}") from exc
         except ValueError as exc:  # name the file the bad condition came from
             raise SceneError(f"{args.conditions}: {exc}") from exc
         print(format_table(ex))
