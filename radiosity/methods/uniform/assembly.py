@@ -27,7 +27,7 @@ __all__ = ["FillSettings", "FillStats", "candidate_pairs", "unoccluded_factors",
 VISIBILITY_MODES = ("auto", "rays", "exact")
 # The fill's blocks aim at this many seconds each (progress), starting from FIRST_BLOCK_PAIRS pairs
 # (and never fewer). 4096 until session 23: View3D's hall keeps 453 of its 716 pairs behind 65+
-# occluders in its first 10 rows, and the bar sat at 0% for half an hour at the defaults.
+# occluders in its first 10 rows, and the bar sat at 0% for over 20 minutes at the defaults.
 BLOCK_SECONDS = 2.0
 FIRST_BLOCK_PAIRS = 512
 # ... except fills of at most this many pairs, one block: a block costs about 1 ms of setup,
