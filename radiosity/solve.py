@@ -331,10 +331,7 @@ def _balance(F, scene: Scene, radiosity: np.ndarray) -> dict[str, list[float]]:
     neither emits into the scene nor receives. Counted, its emission went to "escaped": a closed
     furnace room whose ceiling panel and cylinder touch the ceiling and floor reported 4.96 W of
     its 206.4 W escaping, the covered area's emission."""
-    hidden = getattr(scene, "patch_hidden", None)
-    area = scene.patch_area
-    if hidden is not None and len(hidden) == scene.n_patches:
-        area = np.where(hidden, 0.0, area)
+    area = np.where(scene.patch_hidden, 0.0, scene.patch_area)  # Scene sizes patch_hidden to its patches
     return energy_balance(F, area, scene.reflectance, scene.emission, radiosity)
 
 
