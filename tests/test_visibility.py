@@ -158,6 +158,25 @@ def test_horizon_straddling_source_rays_aim_only_at_the_visible_part():
         np.testing.assert_allclose(f, 1.0, atol=1e-12)
 
 
+@pytest.mark.parametrize("cull", [True, False])
+def test_a_pair_whose_rays_carry_no_weight_is_not_seen_through_a_wall(cull):
+    """Only the top 1e-3 of the source rises above the receiver's plane, so no sample pair
+    carries weight; a wall hides everything. Such pairs once counted as unblocked (a roof
+    piece of View3D's hall saw a wall of the next room: F = 2.5e-6 where 0 is exact)."""
+    receiver = rect(0, 1, 0, 1, 0)
+    source = np.array([[3, 0, -0.999], [3, 1, -0.999], [3, 1, 0.001], [3, 0, 0.001]], float)[::-1].copy()
+    # the wall leaves segments to the source's part below the receiver's plane unblocked: the
+    # pair is undecided by its vertices, though every segment that carries light is blocked
+    wall = np.array([[1.5, -5, -0.3], [1.5, 6, -0.3], [1.5, 6, 5], [1.5, -5, 5]], float)
+    vis = make_vis([receiver, source, wall], samples=2, max_samples=4, cull=cull)
+    assert vis.classify(np.array([0]), np.array([1]))[0][0] == MAYBE
+    assert vis.ray_fraction(np.array([0, 1]), np.array([1, 0]))[0] == 0.0
+    assert vis.ray_fraction(np.array([0, 1]), np.array([1, 0]))[1] == 0.0
+    open_vis = make_vis([receiver, source], samples=2, max_samples=4, cull=cull)
+    # nothing in the way: the same blind rays fall back to exact shadows, which find no shadow
+    np.testing.assert_array_equal(open_vis.ray_fraction(np.array([0, 1]), np.array([1, 0])), 1.0)
+
+
 def test_adaptive_rays_refine_only_partial_pairs():
     low = [rect(0.45, 0.55, 0.45, 0.55, 0), rect(0.2, 0.3, 0.45, 0.55, 0)]
     up = [rect(0.45, 0.55, 0.45, 0.55, 1, down=True)]
@@ -359,7 +378,7 @@ def test_segment_rays_match_embree_and_the_numpy_reference():
     from radiosity.visibility._pairs import _occluder_lists
 
     seg, seg_agree = vis._trace(xs, wx, vis.normals[ii], jj, 3, key, _occluder_lists(local[rows], occ, len(ii)))
-    assert 0 < np.mean(seg) < 1 and not agree.all()
+    assert 0 < np.nanmean(seg) < 1 and not agree.all()
     np.testing.assert_allclose(seg, embree, atol=1e-12)  # jittered rays miss edges: no disagreement
     np.testing.assert_array_equal(seg_agree, agree)
 

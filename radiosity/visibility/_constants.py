@@ -124,6 +124,10 @@ SHADOW_ATOL_SHARE = 0.1
 # 2.5e-6 -> 1.3e-6 off, 77 s -> 117 s.
 SHADOW_ATOL_SHARE_TIGHT = 0.01
 SHADOW_CELL_ORDER = 2
+
+# Pairs whose rays all carry no weight (every sample on the other patch's horizon) take exact
+# shadows at BLIND_ORDER^2 Gauss points of the receiver instead (``Visibility._blind_fraction``).
+BLIND_ORDER = 4
 # ... down to at most this many levels (1/64 of a side)
 SHADOW_MAX_DEPTH = 6
 # ... starting from about square cells, at most this many along an elongated patch's length

@@ -34,10 +34,10 @@ from .. import _tol
 from ..geometry import centroids_and_areas, polygon_normals
 from ..formfactors import gauss_legendre_01, pair_factors, patch_points, square_cell_corners, square_cell_points
 from . import _occluders
-from ._constants import (CAPPED_RTOL_STEP, CELL_FALLBACK_ATOL, CELL_RETRY_POINTS, CHUNK_CELL_PAIRS, CHUNK_CLASSIFY,
-                         CHUNK_SHADOWS, CHUNK_SQUARE_PAIRS, CHUNK_TRIPLES, KINK_BAND, MAX_ROOT_CELLS, MAX_UNION,
-                         MAX_UNION_CELLS, PLANE_REL, RAY_TFAR_SHORT, RECEIVE_SMALLER_WIDTHS, SATURATED_REL,
-                         SHADOW_MAX_DEPTH, WEIGHT_FLOOR_REL)
+from ._constants import (BLIND_ORDER, CAPPED_RTOL_STEP, CELL_FALLBACK_ATOL, CELL_RETRY_POINTS, CHUNK_CELL_PAIRS,
+                         CHUNK_CLASSIFY, CHUNK_SHADOWS, CHUNK_SQUARE_PAIRS, CHUNK_TRIPLES, KINK_BAND, MAX_ROOT_CELLS,
+                         MAX_UNION, MAX_UNION_CELLS, PLANE_REL, RAY_TFAR_SHORT, RECEIVE_SMALLER_WIDTHS,
+                         SATURATED_REL, SHADOW_MAX_DEPTH, WEIGHT_FLOOR_REL)
 from ._exact import hidden_factors, point_factors
 from ._occluders import FREE, FULL, MAYBE, build_occluders
 
@@ -175,6 +175,14 @@ def _occluder_lists(rows: np.ndarray, occ: np.ndarray, m: int) -> tuple[np.ndarr
     starts = np.zeros(m + 1, np.int64)
     np.cumsum(np.bincount(rows, minlength=m), out=starts[1:])
     return starts, np.ascontiguousarray(occ[srt], dtype=np.int64)
+
+
+def _rows_of(rows: np.ndarray, occ: np.ndarray, sel: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """The (pair, occluder) rows of pairs ``sel`` (of m), pairs renumbered 0..len(sel)-1."""
+    where = np.full(m, -1)
+    where[sel] = np.arange(len(sel))
+    keep = where[rows] >= 0
+    return where[rows[keep]], occ[keep]
 
 
 def _subset_lists(starts: np.ndarray, occ: np.ndarray, sel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -437,15 +445,47 @@ class Visibility:
             redo = np.flatnonzero(~agree)
             sub = None if lists is None else _subset_lists(*lists, redo)
             frac[redo] = self._patch_rays(i[redo], j[redo], s1, key[redo], 3, sub)[0]
+        blind = np.flatnonzero(np.isnan(frac) & ~full)
+        if len(blind):
+            sub = None if lists is None else _subset_lists(*lists, blind)
+            frac[blind] = self._blind_fraction(i[blind], j[blind], sub)
         frac[full] = 0.0
         return frac
 
-    def exact_fraction(self, i: np.ndarray, j: np.ndarray, rows: np.ndarray, occ: np.ndarray, order: int
-                       ) -> np.ndarray:
+    def _blind_fraction(self, i, j, lists):
+        """Visible fraction, by exact shadows at Gauss points, of pairs whose rays all carried no
+        weight: each sample on one patch saw the other's samples on or behind its horizon.
+
+        The pair still exchanges light where the patches straddle each other's planes, and
+        rays cannot say how much of it is blocked. Counting such a pair as unblocked, as until
+        2026-12-06, let a roof piece of View3D's hall see a wall of another room through the
+        wall between them (F = 2.5e-6 where 0 is exact: its row summed to 1 + 2.6e-6).
+        The points go on i, else (where none of them sees j) on j, which has the same visible
+        fraction by reciprocity, then both again at a finer rule; a pair no point sees counts
+        as unblocked.
+        """
+        frac = np.full(len(i), np.nan)
+        if lists is None:  # cull=False: the exact classification, not "every patch may block"
+            status, rows, occ = self._classify_pairs(self.quads, i, self.quads, j)
+            frac[status == FULL] = 0.0
+        else:
+            starts, occ = lists
+            rows = np.repeat(np.arange(len(i)), np.diff(starts))
+        for order in (BLIND_ORDER, 4 * BLIND_ORDER):
+            for recv, src in ((i, j), (j, i)):
+                left = np.flatnonzero(np.isnan(frac))
+                if len(left):
+                    sub_rows, sub_occ = _rows_of(rows, occ, left, len(i))
+                    frac[left] = self.exact_fraction(recv[left], src[left], sub_rows, sub_occ, order, blind=np.nan)
+        return np.where(np.isnan(frac), 1.0, frac)
+
+    def exact_fraction(self, i: np.ndarray, j: np.ndarray, rows: np.ndarray, occ: np.ndarray, order: int,
+                       blind: float = 1.0) -> np.ndarray:
         """(m,) visible fraction by exact shadows at ``order**2`` Gauss points of each receiver.
 
         ``rows``/``occ`` list the occluder polygons that may block each pair (from
-        :meth:`classify`). The fraction is ``1 - sum_q w_q F(x_q -> hidden) / sum_q w_q F(x_q -> j)``.
+        :meth:`classify`). The fraction is ``1 - sum_q w_q F(x_q -> hidden) / sum_q w_q F(x_q -> j)``,
+        or ``blind`` where no point sees any of j (all of it on or behind their horizons).
         """
         from ._exact_kernel import exact_pairs
 
@@ -471,7 +511,7 @@ class Visibility:
             hidden = np.minimum(hidden, unocc)
             total = (unocc * w[i[s:e]]).sum(axis=1)
             lost = (hidden * w[i[s:e]]).sum(axis=1)
-            out[s:e] = np.where(total > 0, 1.0 - lost / np.where(total > 0, total, 1.0), 1.0)
+            out[s:e] = np.where(total > 0, 1.0 - lost / np.where(total > 0, total, 1.0), blind)
         return out
 
     def adaptive_hidden(self, i: np.ndarray, j: np.ndarray, rows: np.ndarray, occ: np.ndarray,
@@ -925,7 +965,7 @@ class Visibility:
             lists = _occluder_lists(local[rows], occ, len(part)) if self.cull else None
             frac, _ = self._weighted_fraction(points[part][:, None, :], ones, normals[part], j[part],
                                               self.samples, key, lists)
-            out[part] = frac
+            out[part] = np.where(np.isnan(frac), 1.0, frac)  # NaN: j wholly on the point's horizon, F = 0
         return out
 
     # ------------------------------------------------------------------ rays
@@ -1022,6 +1062,5 @@ class Visibility:
         visible = (weight * ~blocked).sum(axis=(1, 2))
         n_traced = traced.sum(axis=(1, 2))
         n_blocked = (blocked & traced).sum(axis=(1, 2))
-        agree = (n_blocked == 0) | (n_blocked == n_traced)
-        plain = 1.0 - n_blocked / np.maximum(n_traced, 1)
-        return np.where(total > 0, visible / np.where(total > 0, total, 1.0), plain), agree
+        agree = (total > 0) & ((n_blocked == 0) | (n_blocked == n_traced))
+        return np.where(total > 0, visible / np.where(total > 0, total, 1.0), np.nan), agree

@@ -133,8 +133,8 @@ def shadow_rays(xs, wx, nx, quads, normals, j, samples, key, salt, floor_rel, of
 def ray_fractions(weight, traced, starts, blocked):
     """Kernel-weighted unblocked fraction per pair, and whether its traced rays agreed.
 
-    A pair with no weight at all (every sample on the other's horizon) gets the plain fraction
-    of its unblocked traced rays.
+    A pair with no weight at all (every sample pair on one or the other's horizon) gets NaN and
+    does not agree: its rays say nothing about the part of the patches that see each other.
     """
     m, n = weight.shape
     frac = np.empty(m)
@@ -157,11 +157,8 @@ def ray_fractions(weight, traced, starts, blocked):
                     n_blocked += 1
             if not hit:
                 visible += wt
-        agree[p] = n_blocked == 0 or n_blocked == n_traced
-        if total > 0:
-            frac[p] = visible / total
-        else:
-            frac[p] = 1.0 - n_blocked / max(n_traced, 1)
+        agree[p] = total > 0 and (n_blocked == 0 or n_blocked == n_traced)
+        frac[p] = visible / total if total > 0 else np.nan
     return frac, agree
 
 
@@ -181,8 +178,9 @@ def segment_fractions(xs, wx, nx, quads, normals, j, samples, key, salt, floor_r
     Returns
     -------
     frac : (m,) float
+        NaN for a pair whose rays carry no weight (see :func:`ray_fractions`).
     agree : (m,) bool
-        Whether all traced rays of the pair agreed (all blocked or none).
+        Whether all traced rays of the pair agreed (all blocked or none); False without weight.
     n_traced : (m,) int64
     """
     m = xs.shape[0]
@@ -284,6 +282,6 @@ def _segment_block(s, e, xs, wx, nx, quads, normals, j, samples, key, salt, floo
                         n_blocked += 1
                 if not hit:
                     visible += wt
-        agree[p] = n_blocked == 0 or n_blocked == n_traced
-        frac[p] = visible / total if total > 0 else 1.0 - n_blocked / max(n_traced, 1)
+        agree[p] = total > 0 and (n_blocked == 0 or n_blocked == n_traced)
+        frac[p] = visible / total if total > 0 else np.nan  # no weight: see ray_fractions
         n_traced_out[p] = n_traced

@@ -184,6 +184,7 @@ def _apply_visibility(f, quads, centroid, area, i, j, visibility, settings: Fill
     classified once for both.
     """
     from ...visibility import FULL, MAYBE
+    from ...visibility._pairs import _rows_of
     from ...visibility._constants import (AUTO_EXACT_ATOL, AUTO_EXACT_OCCLUDERS, MAX_CELL_OCCLUDERS,
                                           SHADOW_ATOL_SHARE, SHADOW_ATOL_SHARE_TIGHT, SHADOW_CELL_ORDER,
                                           SHADOW_CELLS_BELOW, SHADOW_MAX_DEPTH, SHADOW_PENUMBRA_DEPTH,
@@ -228,10 +229,7 @@ def _apply_visibility(f, quads, centroid, area, i, j, visibility, settings: Fill
 
     def subset(sel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The (pair, occluder) rows of the partly occluded pairs ``sel``, renumbered 0..len(sel)-1."""
-        where = np.full(len(part), -1)
-        where[sel] = np.arange(len(sel))
-        keep = where[pair_of] >= 0
-        return where[pair_of[keep]], occ[keep]
+        return _rows_of(pair_of, occ, sel, len(part))
 
     if (~exact).any():
         sel = np.flatnonzero(~exact)
