@@ -245,6 +245,19 @@ def test_an_empty_object_between_others_names_nothing(tmp_path):
     assert not notes_with(scene, "after their faces")
 
 
+def test_an_object_name_on_two_o_lines_is_noted_and_a_reopened_group_is_not(tmp_path):
+    """Two o lines of one name make one object (one mean): said, with both lines. A g name
+    repeated is OBJ's way to add faces to a group: silent."""
+    verts = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\n"
+    (tmp_path / "o.obj").write_text(verts + "o Cube\nf 1 2 3\no Other\nf 1 3 4\no Cube\nf 1 2 6 5\n")
+    scene = load(tmp_path / "o.obj")
+    assert scene.objects == ["Cube", "Other"]
+    [note] = notes_with(scene, "more than one 'o' line")
+    assert note.startswith(f"{tmp_path / 'o.obj'}: object name(s) 'Cube' (lines 7 and 11)")
+    (tmp_path / "g.obj").write_text(verts + "g Cube\nf 1 2 3\ng Other\nf 1 3 4\ng Cube\nf 1 2 6 5\n")
+    assert not notes_with(load(tmp_path / "g.obj"), "more than one 'o' line")
+
+
 # --- duplicate faces ---------------------------------------------------------------------------
 
 def test_duplicate_faces_are_dropped_and_opposite_ones_kept(tmp_path):

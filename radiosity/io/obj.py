@@ -364,6 +364,8 @@ class _Statements:
         self.current_object = -1
         self.current_material = -1
         self.run_start = 0  # first face after the last g, o or usemtl line
+        self.o_lines: dict[str, int] = {}  # first o line of each name
+        self.o_again: list[tuple[str, int, int]] = []  # (name, first o line, a later o line of it)
 
     def default_object(self) -> int:
         """The object of faces before any o/g line: the file's name."""
@@ -385,6 +387,10 @@ class _Statements:
             self.run_start = n_faces
         if keyword in ("o", "g"):
             name = " ".join(tokens) if tokens else f"unnamed_{number}"
+            if keyword == "o":
+                first = self.o_lines.setdefault(name, number)
+                if first != number:
+                    self.o_again.append((name, first, number))
             if name not in self.object_index:
                 self.object_index[name] = len(self.objects)
                 self.objects.append(name)
@@ -407,6 +413,14 @@ class _Statements:
             self.ignored[keyword] = self.ignored.get(keyword, 0) + 1
 
     def parsed(self, vertices, faces, face_object, face_material, face_line, face_group) -> _Parsed:
+        if self.o_again:
+            # g names repeat by design (a group reopened); two o lines of one name are more often
+            # two objects an exporter named alike, and their means would silently be one
+            shown = ", ".join(f"{name!r} (lines {first} and {again})" for name, first, again in self.o_again[:3])
+            more = f" and {len(self.o_again) - 3} more" if len(self.o_again) > 3 else ""
+            self.notes.append(f"{self.path}: object name(s) {shown}{more} appear on more than one 'o' line; "
+                              "faces under one name are one object (one mean, one row of the summary); "
+                              "rename them to keep them apart")
         return _Parsed(np.asarray(vertices, dtype=float).reshape(-1, 3), faces,
                        np.asarray(face_object, dtype=np.int64), np.asarray(face_material, dtype=np.int64),
                        np.asarray(face_line, dtype=np.int64), np.asarray(face_group, dtype=np.int64), self.groups,
