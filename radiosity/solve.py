@@ -389,6 +389,7 @@ def write_view_factors(scene: Scene, path, *, preset: str = "default", pairs_per
     from .methods.uniform.shards import write_shards
 
     options = _view_factor_options(preset, {**overrides, "cache": False})
+    scene, origin = scene.centred()  # as compute_view_factors; the shards keep the patches where they were
     cut = _cut(scene, options)
     _memory.check_shard_space(cut.n_patches, path, "write them to a larger disk, or use larger patches "
                                                    "(--max-patch-size)")
@@ -397,7 +398,7 @@ def write_view_factors(scene: Scene, path, *, preset: str = "default", pairs_per
     update, close = _progress_bar(options.progress, cut.n_patches, "form factors")
     try:
         with cluster_client(options.workers, options.scheduler) as client:
-            F, _ = write_shards(problem, cut, path, client=client, pairs_per_block=pairs_per_block, progress=update,
+            F, _ = write_shards(problem, cut.moved(origin), path, client=client, pairs_per_block=pairs_per_block, progress=update,
                                 settings={"preset": preset, "formfactor_rtol": options.formfactor_rtol,
                                           "visibility_rtol": options.visibility_atol})  # file key kept
     finally:

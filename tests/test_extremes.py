@@ -863,3 +863,19 @@ def test_a_small_box_far_from_the_origin_solves_as_at_the_origin(tmp_path):
     escaped, emitted = np.asarray(far.energy["escaped"]), np.asarray(far.energy["emitted"])
     assert np.abs(escaped).max() <= 1e-2 * emitted.max()
     assert far.scene.patch_quads.min() > 1e6 - 1e-9
+
+
+def test_view_factors_of_a_small_box_far_from_the_origin_in_and_out_of_core(tmp_path):
+    """The same 1 mm box 1e6 m away: its view factors, in memory and written out of core, are
+    those of the box at the origin (both fill it moved there); the shards keep the patches
+    where the input put them."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", radiosity.RadiosityWarning)
+        near, far = (radiosity.load_scene(_small_lit_box(tmp_path, d)) for d in (0.0, 1e6))
+    reference = radiosity.view_factors(near, preset="draft", cache=False).toarray()
+    np.testing.assert_allclose(radiosity.view_factors(far, preset="draft", cache=False).toarray(), reference,
+                               atol=1e-6)
+    shards = radiosity.write_view_factors(far, tmp_path / "F.shards", preset="draft")
+    np.testing.assert_allclose(shards @ np.eye(far.n_patches), reference, atol=1e-6)
+    stored = np.load(tmp_path / "F.shards" / "patches.npz")
+    assert stored["patch_quads"].min() > 1e6 - 1e-9
