@@ -70,6 +70,13 @@ FLAT_TRIANGLE_REL = 1e-12
 # partition of a face into cells: far below any length that matters, far above round-off.
 SNAP_REL = 1e-12
 
+# Corners of a piece closer than this fraction of its size to the line through its neighbours
+# are dropped before it is cut into convex pieces: extension lines that should meet in one
+# point miss each other by round-off (5e-9 m where the scene lies 1e6 m from the origin), and
+# each near-duplicate corner left a sliver triangle of 1e-12 to 1e-9 m^2 (a room's floor cut
+# into 138 pieces there, 127 at the origin).
+SIMPLIFY_REL = 1e-8
+
 # A merged quad is kept only if each corner turns by at least this much (sine of the angle,
 # times both edge lengths): avoids quads that are triangles with a flat corner.
 CONVEX_TURN_REL = 1e-6
@@ -495,7 +502,10 @@ def convex_pieces(polygon) -> list[np.ndarray]:
     import shapely
     from shapely.geometry.polygon import orient
 
-    polygon = orient(shapely.simplify(polygon, 0.0), 1.0)
+    if polygon.is_empty or polygon.area <= 0:
+        return []
+    x0, y0, x1, y1 = polygon.bounds
+    polygon = orient(shapely.simplify(polygon, SIMPLIFY_REL * float(np.hypot(x1 - x0, y1 - y0))), 1.0)
     if polygon.is_empty or polygon.area <= 0:
         return []
     exterior = np.asarray(polygon.exterior.coords)[:-1]
