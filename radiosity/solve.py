@@ -398,8 +398,8 @@ def write_view_factors(scene: Scene, path, *, preset: str = "default", pairs_per
     update, close = _progress_bar(options.progress, cut.n_patches, "form factors")
     try:
         with cluster_client(options.workers, options.scheduler) as client:
-            F, _ = write_shards(problem, cut.moved(origin), path, client=client, pairs_per_block=pairs_per_block, progress=update,
-                                settings={"preset": preset, "formfactor_rtol": options.formfactor_rtol,
+            F, _ = write_shards(problem, cut.moved(origin), path, client=client, pairs_per_block=pairs_per_block,
+                                progress=update, settings={"preset": preset, "formfactor_rtol": options.formfactor_rtol,
                                           "visibility_rtol": options.visibility_atol})  # file key kept
     finally:
         close()

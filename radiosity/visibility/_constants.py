@@ -124,10 +124,6 @@ SHADOW_ATOL_SHARE = 0.1
 # 2.5e-6 -> 1.3e-6 off, 77 s -> 117 s.
 SHADOW_ATOL_SHARE_TIGHT = 0.01
 SHADOW_CELL_ORDER = 2
-
-# Pairs whose rays all carry no weight (every sample on the other patch's horizon) take exact
-# shadows at BLIND_ORDER^2 Gauss points of the receiver instead (``Visibility._blind_fraction``).
-BLIND_ORDER = 4
 # ... down to at most this many levels (1/64 of a side)
 SHADOW_MAX_DEPTH = 6
 # ... starting from about square cells, at most this many along an elongated patch's length
@@ -173,3 +169,7 @@ CELL_RETRY_POINTS = 16
 # A pair whose cells' grading was capped (``Visibility._settle_capped``) is integrated again at
 # this times its rtol, on both sides, and the side whose results agree better is kept.
 CAPPED_RTOL_STEP = 0.01
+
+# Pairs whose rays all carry no weight (every sample on the other patch's horizon) take exact
+# shadows at BLIND_ORDER^2 Gauss points of the receiver instead (``Visibility._blind_fraction``).
+BLIND_ORDER = 4

@@ -180,11 +180,8 @@ def _apply_visibility(f, quads, centroid, area, i, j, visibility, settings: Fill
     if classified is None:
         status, rows, occ = visibility.classify(i[nz], j[nz])
     else:
-        status, rows, occ = classified
-        local = np.full(len(f), -1)
-        local[nz] = np.arange(len(nz))
-        keep = local[rows] >= 0
-        status, rows, occ = status[nz], local[rows[keep]], occ[keep]
+        rows, occ = _rows_of(classified[1], classified[2], nz, len(f))
+        status = classified[0][nz]
     blocked = nz[status == FULL]
     f[blocked] = 0.0
     stats.n_blocked_pairs += len(blocked)
