@@ -169,3 +169,32 @@ def test_bad_rtol_is_refused(cornell):
     for bad in (-1e-3, 1.0, float("nan")):
         with pytest.raises(ValueError, match="rtol"):
             cornell.irradiance(PENUMBRA[:1], UP[None], sensor_rtol=bad)
+
+
+def test_a_panel_flush_on_a_luminous_ceiling_hides_it_from_a_sensor(tmp_path):
+    """A black panel flush on a luminous ceiling covers (imprint.py) the ceiling's patches above
+    it. Those send nothing in the solve, and the sensors must not see them either: the segment
+    from a sensor to them meets the flush panel at its end only, so the gather once read their
+    emission through it, 31.6x the light under the same panel hung 1 cm lower."""
+    import warnings
+
+    from helpers import axis_box, write_obj
+
+    room = axis_box((0, 0, 0), (4, 3, 2.5), inward=True)
+    ceiling = [f for f in room if np.allclose(f[:, 2], 2.5)]
+    walls = [f for f in room if not np.allclose(f[:, 2], 2.5)]
+    materials = {"grey": ((0.5,) * 3, (0.0,) * 3), "lum": ((0.5,) * 3, (1.0,) * 3), "black": ((0.0,) * 3, (0.0,) * 3)}
+    sensor = {}
+    for name, z in (("flush", 2.5), ("hung", 2.49)):
+        panel = np.array([[1.5, 1, z], [1.5, 2, z], [2.5, 2, z], [2.5, 1, z]], float)  # faces down
+        path = write_obj(tmp_path / f"{name}.obj", {"walls": walls, "ceiling": ceiling, "panel": [panel]}, materials,
+                         {"walls": "grey", "ceiling": "lum", "panel": "black"})
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", radiosity.RadiosityWarning)
+            scene = radiosity.load_scene(path, emission="exitance")
+        assert scene.patch_hidden.any() == (name == "flush")
+        solution = radiosity.solve(scene, preset="draft", cache=False)
+        points = np.array([[2.0, 1.5, z - 0.1], [2.0, 1.5, 1.0], [2.0, 1.5, 0.0]])
+        sensor[name] = solution.irradiance(points, np.tile([0.0, 0.0, 1.0], (3, 1)), sensor_rtol=0)[:, 0]
+    # the 1 cm gap lets a little more light round the hung panel's edges onto the nearest sensor
+    np.testing.assert_allclose(sensor["flush"], sensor["hung"], rtol=0.05)
