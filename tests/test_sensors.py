@@ -198,3 +198,24 @@ def test_a_panel_flush_on_a_luminous_ceiling_hides_it_from_a_sensor(tmp_path):
         sensor[name] = solution.irradiance(points, np.tile([0.0, 0.0, 1.0], (3, 1)), sensor_rtol=0)[:, 0]
     # the 1 cm gap lets a little more light round the hung panel's edges onto the nearest sensor
     np.testing.assert_allclose(sensor["flush"], sensor["hung"], rtol=0.05)
+
+
+def test_sensors_on_edges_and_corners_read_what_their_neighbours_read(tmp_path):
+    """In a furnace room (every face E = 1, rho = 0.5: H = 2 at every point inside) with a box on
+    its floor, a sensor exactly where the floor meets a wall lies in the wall's plane, which is
+    then at grazing: it read 1.0, at the room's corner 0.5, at the box's foot 1.0 and at its
+    corner 1.5. Points on surfaces in two or more planes are now taken just off them."""
+    import warnings
+
+    from helpers import axis_box, write_obj
+
+    box = [f for f in axis_box((1, 1, 0), (2, 2, 1), inward=False) if not np.allclose(f[:, 2], 0)]
+    path = write_obj(tmp_path / "furnace.obj", {"room": axis_box((0, 0, 0), (4, 3, 2.5), inward=True), "box": box},
+                     {"furnace": ((0.5,) * 3, (1.0,) * 3)})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", radiosity.RadiosityWarning)
+        solution = radiosity.solve(radiosity.load_scene(path, emission="exitance"), preset="draft", cache=False)
+    up = [0.0, 0.0, 1.0]
+    points = np.array([[0, 1.5, 0], [0, 0, 0], [2, 1.5, 0], [2, 2, 0], [0, 0, 0], [3, 2.5, 0], [2, 1.5, 0.5]])
+    normals = np.array([up, up, up, up, [1, 1, 1], up, [1, 0, 0]], float)
+    np.testing.assert_allclose(solution.irradiance(points, normals, sensor_rtol=0)[:, 0], 2.0, rtol=2e-3)
