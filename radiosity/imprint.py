@@ -117,6 +117,9 @@ class Imprinted:
     contacts: list[Contact] = field(default_factory=list)
     nonplanar: list[tuple[int, float]] = field(default_factory=list)  # imprinted non-planar faces
     uncut: bool = False  # no face was cut: ``vertices`` and ``pieces`` are the input's vertices and faces
+    # (face, face) pairs of different objects that pass through each other (:func:`_crossing_faces`),
+    # lower face first; such faces are not cut along the crossing
+    crossings: list[tuple[int, int]] = field(default_factory=list)
 
 
 @dataclass
@@ -605,10 +608,13 @@ def imprint_faces(vertices: np.ndarray, faces: list[np.ndarray], face_object: np
     by_face: dict[int, list[tuple[_Part, list]]] = defaultdict(list)
     contacts: list[Contact] = []
     failed: set[int] = set()
+    crossings: set[tuple[int, int]] = set()
     for part in parts:
         try:
             local, part_points, part_of_point, covers = _local(part, parts, candidates)
             regions = _regions_of(part, local, part_points, part_of_point, scale, covers) if local else []
+            crossings.update((min(part.face, f), max(part.face, f))
+                             for f in _crossing_faces(part, local, part_points, part_of_point, CONTACT_REL * scale))
         except _geos_error():  # a degenerate contact GEOS cannot overlay: leave the face uncut
             regions = []
             failed.add(part.face)
@@ -669,13 +675,53 @@ def imprint_faces(vertices: np.ndarray, faces: list[np.ndarray], face_object: np
         faces_text = ", ".join(str(f + 1) for f in sorted(failed)[:5]) + (" ..." if len(failed) > 5 else "")
         warnings.warn(f"imprint: GEOS could not cut {len(failed)} face(s) along their contacts ({faces_text}); "
                       "left uncut", RadiosityWarning, stacklevel=2)
+    crossed = sorted(crossings)
     if not cut_faces:  # nothing cut: the faces are the pieces (a per-face copy took seconds on 581k faces)
         return Imprinted(vertices, faces, np.arange(len(faces), dtype=np.int64), np.zeros(len(faces), bool),
-                         contacts, [], uncut=True)
+                         contacts, [], uncut=True, crossings=crossed)
     emit_whole(done, len(faces))
     verts = np.concatenate(out_vertices) if out_vertices else np.zeros((0, 3))
     return Imprinted(verts, pieces, np.asarray(piece_face, np.int64), np.asarray(piece_hidden, bool),
-                     contacts, nonplanar)
+                     contacts, nonplanar, crossings=crossed)
+
+
+def _crossing_faces(receiver: _Part, parts: list[_Part], points: np.ndarray, owner: np.ndarray, tol: float
+                    ) -> list[int]:
+    """Faces of other objects among ``parts`` that pass through the receiver: vertices farther
+    than the contact tolerance ``tol`` on both sides of its plane, and the line where they meet
+    the plane running more than ``tol`` through its inside. Imprinting cuts along contacts only;
+    a box sunk 5 cm into a floor (9 contact tolerances) is not cut where it enters, so the
+    patches straddling the crossing average the light of both sides (its floor neighbours read
+    2.3% low in a furnace room). ``points``, ``owner``: the parts' vertices and the part of each
+    (:func:`_local`)."""
+    import shapely
+
+    if not len(points):
+        return []
+    height = (points - receiver.origin) @ receiver.normal
+    high = np.full(len(parts), -np.inf)
+    low = np.full(len(parts), np.inf)
+    np.maximum.at(high, owner, height)
+    np.minimum.at(low, owner, height)
+    out = []
+    shape = None
+    for k in np.flatnonzero((high > tol) & (low < -tol)):
+        q = parts[k]
+        if q.obj == receiver.obj:
+            continue
+        h = height[owner == k]
+        nxt = np.roll(np.arange(len(h)), -1)
+        cut = (h * h[nxt]) < 0
+        on = q.poly[cut] + (h[cut] / (h[cut] - h[nxt][cut]))[:, None] * (q.poly[nxt][cut] - q.poly[cut])
+        meet = np.concatenate([on, q.poly[np.abs(h) <= 0.0]])
+        if len(meet) < 2:
+            continue
+        # the receiver shrunk by the tolerance: a face standing on it along an edge only touches
+        shape = _polygon(receiver.to_2d(receiver.poly)).buffer(-tol) if shape is None else shape
+        line = shapely.LineString(receiver.to_2d(meet[np.lexsort(receiver.to_2d(meet).T)]))
+        if shapely.intersection(line, shape).length > tol:
+            out.append(q.face)
+    return out
 
 
 def _extension_lines(regions, shape, tol: float) -> list:

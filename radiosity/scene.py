@@ -264,14 +264,16 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
     faces = data.faces if len(kept) == len(data.faces) else [data.faces[k] for k in kept]
     _memory.check_patches(vertices, faces, max_patch_size)  # refuse before cutting, not during
     uncut = True  # no face was imprinted: with max_patch_size None the patches are the light paths' faces
+    crossing_notes: list[str] = []
     if options.get("imprint", True):
         patches, report, cut = subdivide_imprinted(vertices, faces, data.face_object[kept], max_patch_size)
         uncut = cut.uncut
+        crossing_notes = _crossing_notes(data, kept, cut.crossings)
     else:
         patches, report = subdivide_faces(vertices, faces, max_patch_size)
     patches, report = _in_file_faces(patches, report, kept)
     notes = (list(data.warnings) + _units_notes(data, units) + duplicate_notes + _face_notes(data, report)
-             + material_notes(data.materials))
+             + crossing_notes + material_notes(data.materials))
     if patches.n_patches == 0:
         for note in notes:
             warnings.warn(note, RadiosityWarning, stacklevel=2)
@@ -326,6 +328,24 @@ def _emitter_paths(data, vertices: np.ndarray, faces: list[np.ndarray], kept: np
     normals[rows] = polygon_normals(quads[rows])
     scale = float(np.linalg.norm(np.ptp(quads.reshape(-1, 3), axis=0)))
     return trace_emitters(quads, normals, em, area, data.face_object[coarse.patch_face], data.objects, scale)
+
+
+def _crossing_notes(data, kept: np.ndarray, crossings: list[tuple[int, int]]) -> list[str]:
+    """One note naming the faces of different objects that pass through each other (imprinting
+    cuts along contacts only), or none."""
+    if not crossings:
+        return []
+
+    def named(face: int) -> str:
+        k = kept[face]
+        return f"line {data.face_line[k]} ({data.objects[data.face_object[k]]})"
+
+    shown = "; ".join(f"{named(a)} and {named(b)}" for a, b in crossings[:3])
+    more = f" and {len(crossings) - 3} more pair(s)" if len(crossings) > 3 else ""
+    return [f"{data.path}: faces of different objects pass through each other: {shown}{more}; they are not "
+            "cut where they cross, so the patches there average the light of both sides (a box sunk 5 cm "
+            "into a floor left floor patches 0.2 m away 2.3% short in a furnace test); let objects touch, "
+            "not overlap"]
 
 
 def _in_file_faces(patches: Patches, report: FaceReport, kept: np.ndarray) -> tuple[Patches, FaceReport]:

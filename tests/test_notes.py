@@ -258,6 +258,23 @@ def test_an_object_name_on_two_o_lines_is_noted_and_a_reopened_group_is_not(tmp_
     assert not notes_with(load(tmp_path / "g.obj"), "more than one 'o' line")
 
 
+@pytest.mark.parametrize("sunk, crossing", [(0.0, False), (0.002, False), (0.05, True)])
+def test_a_box_sunk_into_the_floor_is_noted_and_one_standing_on_it_is_not(tmp_path, sunk, crossing):
+    """Imprinting cuts along contacts only. A box 5 cm into a 4 x 3 x 2.5 m room's floor (9 contact
+    tolerances) is not cut where it enters, and its floor neighbours read 2.3% low in a furnace
+    room: noted, naming the faces. Standing on the floor, or 2 mm in (within the tolerance): no note."""
+    from helpers import axis_box, write_obj
+
+    room = axis_box((0, 0, 0), (4, 3, 2.5), inward=True)
+    box = axis_box((1, 1, -sunk), (2, 2, 1), inward=False)
+    scene = load(write_obj(tmp_path / "room.obj", {"room": room, "box": box}))
+    notes = notes_with(scene, "pass through each other")
+    assert bool(notes) == crossing
+    if crossing:
+        assert notes[0].startswith(f"{tmp_path / 'room.obj'}: faces of different objects pass through each other: line ")
+        assert "(room) and line" in notes[0] and "(box)" in notes[0]
+
+
 # --- duplicate faces ---------------------------------------------------------------------------
 
 def test_duplicate_faces_are_dropped_and_opposite_ones_kept(tmp_path):
