@@ -291,3 +291,23 @@ def test_two_area_lanes_read_in_place_or_copied_alike():
     lambert = separated_factors(quads, normals, centroid, area, rec, src, order, _MODES["fill"])
     assert np.all(in_place != lambert)  # every pair took the two-area rule
     assert np.array_equal(in_place[shuffle], copied)
+
+
+@pytest.mark.parametrize("rtol", [1e-4, 1e-6, 1e-8])
+def test_a_touching_needle_the_point_budget_stops_short_is_integrated_again(rtol):
+    """A floor sliver 2.2 m long touching a cylinder's side along its 2 cm base (a room of the
+    session-24 adversarial pass): within the fill's 4,096 points a pair it got 0.0219756 at rtol
+    1e-6 and 0.0220821 at 1e-8 for 0.0219844589, and its row summed to 1 + 8.8e-5. Pairs the
+    budget stops short are integrated again with a larger one."""
+    from radiosity.formfactors._quadrature import pair_factors
+    from radiosity.geometry import centroids_and_areas
+
+    sliver = np.array([[3.0, 4.0, 0.0], [2.1, 2.0, 0.0], [2.0898, 1.9224, 0.0], [2.0898, 1.9224, 0.0]])
+    side = np.array([[2.0898, 1.9224, 0.0], [2.1, 2.0, 0.0], [2.0898, 1.9224, 1.2], [2.0898, 1.9224, 1.2]])
+    quads = np.array([sliver, side])
+    normals = polygon_normals(quads)
+    centroid, area = centroids_and_areas(quads)
+    exact = pair_factors(quads, normals, centroid, area, np.array([0]), np.array([1]), rtol=1e-10)[0]
+    f = once_factors(quads, normals, centroid, area, np.array([0]), np.array([1]), rtol=rtol,
+                     max_points=_tol.PAIR_MAX_POINTS, order=np.array([0]))
+    assert f[0] == pytest.approx(exact, rel=rtol)
