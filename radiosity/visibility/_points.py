@@ -99,7 +99,7 @@ def off_inner_edges(points: np.ndarray, quads: np.ndarray, normals: np.ndarray, 
         ks.append(members[np.fromiter(itertools.chain.from_iterable(found), np.int64, int(count.sum()))])
     p, k = np.concatenate(ps), np.concatenate(ks)
     x = points[p]
-    on = np.abs(np.einsum("tc,tc->t", x - centre[k], normals[k])) <= tol
+    on = (np.abs(np.einsum("tc,tc->t", x - centre[k], normals[k])) <= tol) & normals[k].any(axis=1)  # no degenerate
     edge = np.roll(quads[k], -1, axis=1) - quads[k]
     inward = np.cross(normals[k][:, None, :], edge)  # counter-clockwise about the normal
     length = np.linalg.norm(inward, axis=2)
