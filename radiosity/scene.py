@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from . import _memory
-from ._checks import duplicate_faces, material_notes
+from ._checks import _named, duplicate_faces, material_notes
 from ._lightpaths import light_path_notes, trace_emitters
 from ._errors import RadiosityWarning, SceneError
 from ._validate import reject_unknown
@@ -340,9 +340,8 @@ def _crossing_notes(data, kept: np.ndarray, crossings: list[tuple[int, int]]) ->
         k = kept[face]
         return f"line {data.face_line[k]} ({data.objects[data.face_object[k]]})"
 
-    shown = "; ".join(f"{named(a)} and {named(b)}" for a, b in crossings[:3])
-    more = f" and {len(crossings) - 3} more pair(s)" if len(crossings) > 3 else ""
-    return [f"{data.path}: faces of different objects pass through each other: {shown}{more}; they are not "
+    shown = _named([f"{named(a)} and {named(b)}" for a, b in crossings])
+    return [f"{data.path}: faces of different objects pass through each other: {shown}; they are not "
             "cut where they cross, so the patches there average the light of both sides (a box sunk 5 cm "
             "into a floor left floor patches 0.2 m away 2.3% short in a furnace test); let objects touch, "
             "not overlap"]

@@ -399,11 +399,16 @@ def write_view_factors(scene: Scene, path, *, preset: str = "default", pairs_per
     try:
         with cluster_client(options.workers, options.scheduler) as client:
             F, _ = write_shards(problem, cut.moved(origin), path, client=client, pairs_per_block=pairs_per_block,
-                                progress=update, settings={"preset": preset, "formfactor_rtol": options.formfactor_rtol,
-                                          "visibility_rtol": options.visibility_atol})  # file key kept
+                                progress=update, settings=_stored_settings(preset, options))
     finally:
         close()
     return F
+
+
+def _stored_settings(preset: str, options) -> dict:
+    """The fill settings a view-factor file or shard folder records (``visibility_rtol``: the
+    file key kept from before ``visibility_atol``)."""
+    return {"preset": preset, "formfactor_rtol": options.formfactor_rtol, "visibility_rtol": options.visibility_atol}
 
 
 # The error estimate's second fill tightens both tolerances by this factor, and its difference
@@ -462,8 +467,7 @@ def compute_view_factors(scene: Scene, *, preset: str = "default", enforce: str 
     cut = prepared.scene
     active = ~_inactive(cut)
     F = _without(prepared.F, ~active)
-    settings = {"preset": preset, "formfactor_rtol": options.formfactor_rtol,
-                "visibility_rtol": options.visibility_atol}  # file key kept
+    settings = _stored_settings(preset, options)
     if enforce == "closure" and not force:
         check_closed(F, active, options.formfactor_rtol + options.visibility_atol, names=cut.objects,
                      patch_object=cut.patch_object)

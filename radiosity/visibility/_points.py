@@ -71,8 +71,23 @@ def block_order(n_clusters: int) -> np.ndarray:
     return np.random.default_rng(0).permutation(n_blocks).astype(np.int64)
 
 
-def off_inner_edges(points: np.ndarray, quads: np.ndarray, normals: np.ndarray, tol: float, step: float
-                    ) -> np.ndarray:
+def patch_trees(quads: np.ndarray) -> tuple[np.ndarray, list]:
+    """The patches' centres, and k-d trees over them by size class: (members, tree, largest
+    radius) per power of two of the radius, so a point's ball query meets few patches."""
+    from scipy.spatial import cKDTree
+
+    centre = quads.mean(axis=1)
+    radius = np.linalg.norm(quads - centre[:, None, :], axis=2).max(axis=1)
+    size_class = np.floor(np.log2(np.maximum(radius, 1e-300))).astype(np.int64)
+    trees = []
+    for c in np.unique(size_class):
+        members = np.flatnonzero(size_class == c)
+        trees.append((members, cKDTree(centre[members]), float(radius[members].max())))
+    return centre, trees
+
+
+def off_inner_edges(points: np.ndarray, quads: np.ndarray, normals: np.ndarray, tol: float, step: float,
+                    trees: tuple[np.ndarray, list] | None = None) -> np.ndarray:
     """The points, those on two or more patches in different planes moved ``step`` off each of
     them along its normal.
 
@@ -81,19 +96,15 @@ def off_inner_edges(points: np.ndarray, quads: np.ndarray, normals: np.ndarray, 
     fills half the hemisphere: in a furnace room (B = 2 everywhere) a sensor there read 1.0, at
     a room's corner 0.5, at a box's corner on the floor 1.5. Moved off each surface it lies on,
     the point takes the value its neighbours on the surface converge to. A point on one surface
-    only is left where it is (the surface is behind its hemisphere either way).
+    only is left where it is (the surface is behind its hemisphere either way). ``trees``:
+    :func:`patch_trees` of the quads (built here if not given).
     """
-    from scipy.spatial import cKDTree
-
     if not len(points) or not len(quads):
         return points
-    centre = quads.mean(axis=1)
-    radius = np.linalg.norm(quads - centre[:, None, :], axis=2).max(axis=1)
-    size_class = np.floor(np.log2(np.maximum(radius, 1e-300))).astype(np.int64)
+    centre, by_size = patch_trees(quads) if trees is None else trees
     ps, ks = [], []
-    for c in np.unique(size_class):  # patches of about one size per tree: few candidates per point
-        members = np.flatnonzero(size_class == c)
-        found = cKDTree(centre[members]).query_ball_point(points, radius[members].max() + tol, return_sorted=False)
+    for members, tree, reach in by_size:
+        found = tree.query_ball_point(points, reach + tol, return_sorted=False)
         count = np.fromiter((len(h) for h in found), np.int64, len(found))
         ps.append(np.repeat(np.arange(len(points)), count))
         ks.append(members[np.fromiter(itertools.chain.from_iterable(found), np.int64, int(count.sum()))])
@@ -176,6 +187,7 @@ class SensorGather:
                                     self.scale)
         self.inner = inner
         self._outer = None
+        self._trees = None  # patch_trees, on first use
         self.n_exact = 0
 
     @property
@@ -197,7 +209,9 @@ class SensorGather:
         out = np.zeros((len(points), 3))
         if len(points) == 0 or len(self.lit) == 0:
             return out
-        points = off_inner_edges(points, self.quads, self.normals, self.tol, EDGE_NUDGE_REL * self.scale)
+        if self._trees is None:
+            self._trees = patch_trees(self.quads)
+        points = off_inner_edges(points, self.quads, self.normals, self.tol, EDGE_NUDGE_REL * self.scale, self._trees)
         inside = inside_hull(points, self.quads.reshape(-1, 3), self.tol)
         for mask, occ in ((inside, self.inner), (~inside, None)):
             idx = np.flatnonzero(mask)

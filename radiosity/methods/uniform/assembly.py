@@ -159,33 +159,23 @@ def unoccluded_factors(quads: np.ndarray, normals: np.ndarray, centroid: np.ndar
                         max_points=_tol.PAIR_MAX_POINTS, mode="fill")
 
 
-def _apply_visibility(f, quads, centroid, area, i, j, visibility, settings: FillSettings, stats: FillStats, *,
-                      classified: tuple | None = None) -> None:
+def _apply_visibility(f, quads, centroid, area, i, j, visibility, settings: FillSettings, stats: FillStats,
+                      classified: tuple) -> None:
     """Multiply the unoccluded factors f (in place) by each pair's visible fraction.
 
-    ``classified``: (status, rows, occ) of all the pairs from ``visibility.classify``, where the
-    caller classified them already (:func:`fill_block`, before the factors: blocked pairs need
-    none).
+    ``classified``: (status, rows, occ) of all the pairs from ``visibility.classify``
+    (:func:`fill_block` classifies before the factors: blocked pairs need none).
     """
-    from ...visibility import FULL, MAYBE
+    from ...visibility import MAYBE
     from ...visibility._pairs import _rows_of
     from ...visibility._constants import (AUTO_EXACT_ATOL, AUTO_EXACT_OCCLUDERS, MAX_CELL_OCCLUDERS,
                                           SHADOW_ATOL_SHARE, SHADOW_ATOL_SHARE_TIGHT, SHADOW_CELL_ORDER,
                                           SHADOW_CELLS_BELOW, SHADOW_MAX_DEPTH, SHADOW_PENUMBRA_DEPTH,
                                           SHADOW_RTOL_SHARE, SHADOW_TIGHT_MAX_DEPTH)
 
-    if visibility.cull and visibility.n_occluders == 0:  # nothing can block: every pair is free
-        return
     nz = np.flatnonzero(f > 0)
-    if classified is None:
-        status, rows, occ = visibility.classify(i[nz], j[nz])
-    else:
-        rows, occ = _rows_of(classified[1], classified[2], nz, len(f))
-        status = classified[0][nz]
-    blocked = nz[status == FULL]
-    f[blocked] = 0.0
-    stats.n_blocked_pairs += len(blocked)
-    part = np.flatnonzero(status == MAYBE)
+    rows, occ = _rows_of(classified[1], classified[2], nz, len(f))
+    part = np.flatnonzero(classified[0][nz] == MAYBE)
     if not len(part):
         return
     stats.n_traced_pairs += len(part)
@@ -323,7 +313,7 @@ def fill_block(quads, normals, centroid, area, visibility, settings: FillSetting
     t0 = time.perf_counter()
     classified = None
     need = slice(None)
-    if visibility is not None and not (visibility.cull and visibility.n_occluders == 0):
+    if visibility is not None and not (visibility.cull and visibility.n_occluders == 0):  # else nothing blocks
         # classified before the factors: a pair some occluder hides whole needs none (on the
         # blocked plates cut 8 x 8, 1,936 of the 4,096 pairs)
         classified = visibility.classify(i, j)
@@ -335,7 +325,8 @@ def fill_block(quads, normals, centroid, area, visibility, settings: FillSetting
     t1 = time.perf_counter()
     stats.seconds_formfactors += t1 - t0
     if visibility is not None:
-        _apply_visibility(f, quads, centroid, area, i, j, visibility, settings, stats, classified=classified)
+        if classified is not None:
+            _apply_visibility(f, quads, centroid, area, i, j, visibility, settings, stats, classified)
         for name in ("n_traced_pairs", "n_blocked_pairs", "n_exact_pairs"):  # the mirrors share the status
             setattr(stats, name, 2 * getattr(stats, name))
         stats.seconds_visibility += time.perf_counter() - t1
