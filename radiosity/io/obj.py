@@ -26,7 +26,6 @@ from pathlib import Path
 
 import numpy as np
 
-from .._checks import _named
 from .._errors import SceneError
 from ._obj_bulk import ACTIVE, F, S, V, Irregular, Scan, parse_faces, parse_vertices, scan_lines, scan_text
 from ._text import excerpt, parse_float, read_input, split_lines
@@ -417,8 +416,10 @@ class _Statements:
         if self.o_again:
             # g names repeat by design (a group reopened); two o lines of one name are more often
             # two objects an exporter named alike, and their means would silently be one
-            shown = _named([f"{name!r} (lines {first} and {again})" for name, first, again in self.o_again])
-            self.notes.append(f"{self.path}: object name(s) {shown} appear on more than one 'o' line; "
+            # (reading may not import the scene stage's _checks._named: tests/test_layout.py)
+            shown = ", ".join(f"{name!r} (lines {first} and {again})" for name, first, again in self.o_again[:5])
+            more = f" and {len(self.o_again) - 5} more" if len(self.o_again) > 5 else ""
+            self.notes.append(f"{self.path}: object name(s) {shown}{more} appear on more than one 'o' line; "
                               "faces under one name are one object (one mean, one row of the summary); "
                               "rename them to keep them apart")
         return _Parsed(np.asarray(vertices, dtype=float).reshape(-1, 3), faces,
