@@ -21,6 +21,7 @@ from hypothesis import strategies as st
 import radiosity
 from radiosity.methods.uniform.system import (bound_rows, energy_balance, gain_note, gained_power, gaining_patches,
                                               solve_system)
+from radiosity.visibility._constants import GOOD, OUT_OF_POINTS
 from helpers import make_vis, prism, write_obj
 
 RING = 12
@@ -316,10 +317,10 @@ def test_shadow_cells_out_of_points_say_so_and_the_fill_recovers():
     status, rows, occ = vis.classify(i, j)
     assert status[0] == radiosity.visibility.MAYBE
     starts = np.array([0, len(occ)])
-    _, ok, _ = vis._cell_pairs(i, j, starts, occ, 1e-9, 4096)
-    assert not ok[0]  # the bound asked for more than 4,096 points
-    reference, ok, _ = vis._cell_pairs(i, j, starts, occ, 1e-11, 200_000)
-    assert ok[0]
+    _, status, _ = vis._cell_pairs(i, j, starts, occ, 1e-9, 4096)
+    assert status[0] == OUT_OF_POINTS  # the bound asked for more than 4,096 points
+    reference, status, _ = vis._cell_pairs(i, j, starts, occ, 1e-11, 200_000)
+    assert status[0] == GOOD
     unocc = polygon_to_polygon(vis.quads[0], vis.quads[1], rtol=1e-12)
     hidden = vis.exact_hidden(i, j, rows, occ, 1e-9, np.array([unocc]))
     np.testing.assert_allclose(hidden, reference, atol=1e-9)  # 0.0022 off before

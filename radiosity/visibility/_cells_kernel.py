@@ -37,6 +37,7 @@ from .._geometry_kernels import newell_z
 # numba's disk cache of this module's kernels holds the _exact_kernel helpers compiled in, and
 # is keyed on this file alone: a change there must touch this file too, or stale code runs
 # (last: _point_hidden's one-occluder path, _clip, _lambert and _hidden_polygon skip work; session 16).
+from ._constants import GOOD, OUT_OF_POINTS, OUT_OF_ROOM
 from ._exact_kernel import _classify_one, _hidden_polygon, _lambert, _point_hidden, union_scratch
 
 # Event lines one pair may cut its receiver by, and the cells they may make.
@@ -263,10 +264,11 @@ def _pair_hidden(rec, nr, src, sn, occ, t0, t1, opolys, onormal, ocenter, oinwar
                  gn, gw, work, work2):
     """Mean over the receiver (its part in front of the source) of the hidden form factor.
 
-    Returns (hidden, ok, points); ok is False where a point needed shapely (more than
-    max_union hidden polygons), the lines, cells or pieces ran out, or the budget of
-    max_points cut a piece's order below what the bound asks (a strip of floor behind a
-    desk, its edge on the desk's back face: 15% low at rtol 1e-9 and 4,096 points, silently).
+    Returns (hidden, status, points, capped); status is OUT_OF_ROOM where a point needed
+    shapely (more than max_union hidden polygons) or the lines, cells or pieces ran out, and
+    OUT_OF_POINTS where the budget of max_points cut a piece's order below what the bound asks
+    (a strip of floor behind a desk, its edge on the desk's back face: 15% low at rtol 1e-9 and
+    4,096 points, silently). Either way the pair stops there and its hidden factor is 0.
     """
     (a, b, s1, s2, hp, hn, levels, lcount, nxt, sa, sb, lines, cells, ccount, tmp, pieces, pdepth, pquad, segs) = work
     (piece3, locc, pocc, si, sj, outside, valid, gi, gj) = work2
@@ -301,7 +303,7 @@ def _pair_hidden(rec, nr, src, sn, occ, t0, t1, opolys, onormal, ocenter, oinwar
         nd -= 1
     area = _polygon_area2(dom, nd)
     if nd < 3 or area == 0.0:
-        return 0.0, True, 0, False
+        return 0.0, GOOD, 0, False
     if area < 0.0:
         for k in range(nd // 2):
             for c in range(2):
@@ -317,7 +319,7 @@ def _pair_hidden(rec, nr, src, sn, occ, t0, t1, opolys, onormal, ocenter, oinwar
     fc = sn[0] * (ox - scx) + sn[1] * (oy - scy) + sn[2] * (oz - scz)
     nd = _clip2(dom, nd, tmp, fa, fb, fc, 1e-12 * (size + abs(fc)))
     if nd < 3:
-        return 0.0, True, 0, False
+        return 0.0, GOOD, 0, False
     for k in range(nd):
         dom[k, 0] = tmp[k, 0]
         dom[k, 1] = tmp[k, 1]
@@ -335,7 +337,7 @@ def _pair_hidden(rec, nr, src, sn, occ, t0, t1, opolys, onormal, ocenter, oinwar
             pocc[n_occ] = occ[t]
             n_occ += 1
     if n_occ == 0:
-        return 0.0, True, 0, False
+        return 0.0, GOOD, 0, False
     n_lines = 0
     for t in range(n_occ):
         kk = pocc[t]
@@ -374,7 +376,8 @@ def _pair_hidden(rec, nr, src, sn, occ, t0, t1, opolys, onormal, ocenter, oinwar
                         fz = K2[e, 2] - K[v, 2]
                         n_lines = _add_line(lines, n_lines, ey * fz - ez * fy, ez * fx - ex * fz, ex * fy - ey * fx,
                                             K[v, 0], K[v, 1], K[v, 2], o, e1, e2, dom, nd, eps)
-    ok = n_lines < lines.shape[0]
+    if n_lines >= lines.shape[0]:
+        return 0.0, OUT_OF_ROOM, 0, False
     capped = False
     # 3. cut the domain into convex cells
     n_cells = 1
@@ -391,8 +394,7 @@ def _pair_hidden(rec, nr, src, sn, occ, t0, t1, opolys, onormal, ocenter, oinwar
             if not (lo < -eps and hi > eps):
                 continue
             if n_cells >= cells.shape[0] or nc + 2 > cells.shape[1]:
-                ok = False
-                continue
+                return 0.0, OUT_OF_ROOM, 0, False
             m2 = _clip2(cells[c], nc, cells[n_cells], -la, -lb, -lc, eps)
             m1 = _clip2(cells[c], nc, tmp, la, lb, lc, eps)
             if m1 >= 3 and m2 >= 3:
@@ -426,8 +428,7 @@ def _pair_hidden(rec, nr, src, sn, occ, t0, t1, opolys, onormal, ocenter, oinwar
         k = 1
         while k < ccount[c] - 1:
             if n_pieces >= pieces.shape[0]:
-                ok = False
-                break
+                return 0.0, OUT_OF_ROOM, 0, False
             quad = k + 2 < ccount[c]
             for cc in range(2):
                 pieces[n_pieces, 0, cc] = cells[c, 0, cc]
@@ -536,12 +537,11 @@ def _pair_hidden(rec, nr, src, sn, occ, t0, t1, opolys, onormal, ocenter, oinwar
         if p == 0:
             p = _ORDERS[len(_ORDERS) - 1]
             if dep < MAX_DEPTH:  # the bound asked for a split the budget could not pay
-                ok = False
+                return 0.0, OUT_OF_POINTS, done, False
             else:  # graded as deep as it goes and still short of the bound
                 capped = True
-        while p > 1 and p * p * (n_pieces + 1) > room:
-            p -= 1
-            ok = False  # an order below the bound's: the caller falls back to adaptive squares
+        if p > 1 and p * p * (n_pieces + 1) > room:  # an order below the bound's would do
+            return 0.0, OUT_OF_POINTS, done, False
         done += p * p
         # one possible occluder: clip it directly (a call of _point_hidden passes twenty arrays,
         # which cost as much as the clipping; the blocked plates' cells 1.4x faster)
@@ -578,9 +578,9 @@ def _pair_hidden(rec, nr, src, sn, occ, t0, t1, opolys, onormal, ocenter, oinwar
                     f_h, good = _point_hidden(x, nr, src, sn, locc, 0, n_local, opolys, onormal, tol, max_union, a,
                                               b, s1, s2, hp, hn, levels, lcount, nxt, sa, sb)
                     if not good:
-                        ok = False
+                        return 0.0, OUT_OF_ROOM, done, False
                 hidden += wq * f_h
-    return hidden / area, ok, done, capped
+    return hidden / area, GOOD, done, capped
 
 
 @njit(cache=True, inline="always")
@@ -629,7 +629,7 @@ _PAIR_BLOCK = 16
 
 @njit(cache=True)
 def _cells_block(s, e, quads, normals, i, j, starts, occ, opolys, onormal, ocenter, oinward, tol, max_union, rtol,
-                 max_points, gn, gw, hidden, ok, n_points, capped):
+                 max_points, gn, gw, hidden, status, n_points, capped):
     ms = opolys.shape[1]
     ns = quads.shape[1]
     work = union_scratch(ns, ms, max_union) + (
@@ -642,7 +642,7 @@ def _cells_block(s, e, quads, normals, i, j, starts, occ, opolys, onormal, ocent
     work2 = (np.empty((4, 3)), np.empty(most, np.int64), np.empty(most, np.int64), np.empty(4), np.empty(4), np.zeros(ms, np.bool_),
              np.zeros(ms, np.bool_), np.empty((4, ms)), np.empty((4, ms)))
     for p in range(s, e):
-        hidden[p], ok[p], n_points[p], capped[p] = _pair_hidden(
+        hidden[p], status[p], n_points[p], capped[p] = _pair_hidden(
             quads[i[p]], normals[i[p]], quads[j[p]], normals[j[p]], occ, starts[p], starts[p + 1], opolys, onormal,
             ocenter, oinward, tol, max_union, rtol, max_points, gn, gw, work, work2)
 
@@ -662,9 +662,10 @@ def cell_pairs(quads, normals, i, j, starts, occ, opolys, onormal, ocenter, oinw
     hidden : (m,) float
         Mean over receiver i of F(x -> the part of j hidden from x), over x in front of j's
         plane (points behind it see j's back: nothing).
-    ok : (m,) bool
-        False where the lines, cells, pieces, the compiled union or the point budget ran out
-        (the caller falls back to adaptive squares).
+    status : (m,) int8
+        GOOD; OUT_OF_POINTS where the point budget ran out (a larger one may do); OUT_OF_ROOM
+        where the lines, cells, pieces or the compiled union did. A pair that is not GOOD has
+        hidden 0 (the caller falls back to the other side, then to adaptive squares).
     points : (m,) int
         Receiver points evaluated.
     capped : (m,) bool
@@ -674,11 +675,12 @@ def cell_pairs(quads, normals, i, j, starts, occ, opolys, onormal, ocenter, oinw
     """
     m = i.shape[0]
     hidden = np.zeros(m)
-    ok = np.ones(m, np.bool_)
+    status = np.zeros(m, np.int8)
     n_points = np.zeros(m, np.int64)
     capped = np.zeros(m, np.bool_)
     n_blocks = (m + _PAIR_BLOCK - 1) // _PAIR_BLOCK
     for blk in prange(n_blocks):
         _cells_block(blk * _PAIR_BLOCK, min(m, (blk + 1) * _PAIR_BLOCK), quads, normals, i, j, starts, occ, opolys,
-                     onormal, ocenter, oinward, tol, max_union, rtol, max_points, gn, gw, hidden, ok, n_points, capped)
-    return hidden, ok, n_points, capped
+                     onormal, ocenter, oinward, tol, max_union, rtol, max_points, gn, gw, hidden, status, n_points,
+                     capped)
+    return hidden, status, n_points, capped

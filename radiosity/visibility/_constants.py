@@ -166,6 +166,11 @@ CELL_FALLBACK_ATOL = 1e-10
 # budget (a floor patch crossed by a partition's foot took 54k points for 1e-11; squares, which
 # resolve the jump there at first order, left its factor to a wall 3.6e-4 low).
 CELL_RETRY_POINTS = 16
+# How a pair's cells ended (``_cells_kernel``): integrated; short of points (a larger budget may
+# do: the retry above); short of lines, cells, pieces or compiled unions (no budget will). A pair
+# stops at its first shortfall and its value is not used: the hall's pairs behind 20-80 fins ran
+# out on 2 of 3, and were integrated in full, then retried in full, before being thrown away.
+GOOD, OUT_OF_POINTS, OUT_OF_ROOM = 0, 1, 2
 # A pair whose cells' grading was capped (``Visibility._settle_capped``) is integrated again at
 # this times its rtol, on both sides, and the side whose results agree better is kept.
 CAPPED_RTOL_STEP = 0.01

@@ -35,9 +35,9 @@ from ..geometry import centroids_and_areas, polygon_normals
 from ..formfactors import gauss_legendre_01, pair_factors, patch_points, square_cell_corners, square_cell_points
 from . import _occluders
 from ._constants import (BLIND_ORDER, CAPPED_RTOL_STEP, CELL_FALLBACK_ATOL, CELL_RETRY_POINTS, CHUNK_CELL_PAIRS,
-                         CHUNK_CLASSIFY, CHUNK_SHADOWS, CHUNK_SQUARE_PAIRS, CHUNK_TRIPLES, KINK_BAND, MAX_ROOT_CELLS,
-                         MAX_UNION, MAX_UNION_CELLS, PLANE_REL, RAY_TFAR_SHORT, RECEIVE_SMALLER_WIDTHS,
-                         SATURATED_REL, SHADOW_MAX_DEPTH, WEIGHT_FLOOR_REL)
+                         CHUNK_CLASSIFY, CHUNK_SHADOWS, CHUNK_SQUARE_PAIRS, CHUNK_TRIPLES, GOOD, KINK_BAND,
+                         MAX_ROOT_CELLS, MAX_UNION, MAX_UNION_CELLS, OUT_OF_POINTS, PLANE_REL, RAY_TFAR_SHORT,
+                         RECEIVE_SMALLER_WIDTHS, SATURATED_REL, SHADOW_MAX_DEPTH, WEIGHT_FLOOR_REL)
 from ._exact import hidden_factors, point_factors
 from ._occluders import FREE, FULL, MAYBE, build_occluders
 
@@ -828,35 +828,37 @@ class Visibility:
         if not len(i):
             return hidden
         starts, occ_sorted = _occluder_lists(rows, occ, len(i))
-        bad, capped = [], []
+        status = np.empty(len(i), np.int8)
+        capped = np.empty(len(i), bool)
         for s in range(0, len(i), CHUNK_CELL_PAIRS):
             e = min(len(i), s + CHUNK_CELL_PAIRS)
-            hidden[s:e], ok, cap = self._cell_pairs(i[s:e], j[s:e],
-                                                    *_subset_lists(starts, occ_sorted, np.arange(s, e)), rtol,
-                                                    max_points)
-            bad.append(s + np.flatnonzero(~ok))
-            capped.append(s + np.flatnonzero(ok & cap))
-        bad, capped = np.concatenate(bad), np.concatenate(capped)
-        if len(bad):
-            # a pair whose bound asked for more points than the budget (a floor patch crossed by
-            # a partition's foot: 3.6e-4 off on squares, which resolve the jump at first order)
-            # tries again with a larger one before the squares
-            retry, ok, cap = self._cell_pairs(i[bad], j[bad], *_subset_lists(starts, occ_sorted, bad), rtol,
-                                              max_points * CELL_RETRY_POINTS)
-            hidden[bad[ok]] = retry[ok]
-            capped = np.concatenate([capped, bad[ok & cap]])
-            bad = bad[~ok]
+            hidden[s:e], status[s:e], capped[s:e] = self._cell_pairs(
+                i[s:e], j[s:e], *_subset_lists(starts, occ_sorted, np.arange(s, e)), rtol, max_points)
+
+        def again(sel, receiver, source):
+            """The pairs ``sel`` from ``receiver`` to ``source`` with the larger budget."""
+            return self._cell_pairs(receiver[sel], source[sel], *_subset_lists(starts, occ_sorted, sel), rtol,
+                                    max_points * CELL_RETRY_POINTS)
+
+        # a pair whose bound asked for more points than the budget (a floor patch crossed by
+        # a partition's foot: 3.6e-4 off on squares, which resolve the jump at first order)
+        # tries again with a larger one; a pair short of lines or cells would be short again
+        short = np.flatnonzero(status == OUT_OF_POINTS)
+        if len(short):
+            hidden[short], status[short], capped[short] = again(short, i, j)
+        bad = np.flatnonzero(status != GOOD)
         if len(bad):
             # then from the source's side, mirrored by reciprocity: a shadow that is a thin strip
             # on the receiver can be a broad one on the source. A ceiling piece beside a light
             # hung 1 mm below it sees the floor's far end hidden from a strip 0.8 mm wide along
             # its edge; its cells split that strip four ways until the budget ran out, and the
             # squares then missed it (F 2.4e-4 high); from the floor, 192 points.
-            mirror, ok, _ = self._cell_pairs(j[bad], i[bad], *_subset_lists(starts, occ_sorted, bad), rtol,
-                                             max_points * CELL_RETRY_POINTS)
+            mirror, mirror_status, _ = again(bad, j, i)
+            good = bad[mirror_status == GOOD]
             area = self._areas()
-            hidden[bad[ok]] = mirror[ok] * area[j[bad[ok]]] / area[i[bad[ok]]]
-            bad = bad[~ok]
+            hidden[good] = mirror[mirror_status == GOOD] * area[j[good]] / area[i[good]]
+            bad = bad[mirror_status != GOOD]
+        capped = np.flatnonzero((status == GOOD) & capped)
         if len(capped):
             hidden[capped] = self._settle_capped(i[capped], j[capped], *_subset_lists(starts, occ_sorted, capped),
                                                  rtol, max_points, hidden[capped])
@@ -888,6 +890,7 @@ class Visibility:
         own, own_ok, _ = self._cell_pairs(i, j, starts, occ, rtol * CAPPED_RTOL_STEP, budget)
         coarse, coarse_ok, _ = self._cell_pairs(j, i, starts, occ, rtol, budget)
         fine, fine_ok, _ = self._cell_pairs(j, i, starts, occ, rtol * CAPPED_RTOL_STEP, budget)
+        own_ok, coarse_ok, fine_ok = own_ok == GOOD, coarse_ok == GOOD, fine_ok == GOOD
         area = self._areas()
         ratio = area[j] / np.where(area[i] > 0, area[i], 1.0)
         own_drift = np.where(own_ok, np.abs(own - first), np.inf)
@@ -897,16 +900,17 @@ class Visibility:
 
     def _cell_pairs(self, i, j, starts, occ, rtol, max_points):
         """``_cells_kernel.cell_pairs`` on pairs (i, j) with occluder lists (starts, occ): the
-        hidden factors, where they are good and where their grading was capped."""
+        hidden factors, their status (``GOOD``, ``OUT_OF_POINTS``, ``OUT_OF_ROOM``) and where
+        their grading was capped."""
         from ._cells_kernel import cell_pairs
 
         gn, gw = _gauss_table()
         o = self.occluders
-        hidden, ok, n_points, capped = cell_pairs(self.quads, self.normals, i, j, starts, occ, o.polys, o.normal,
-                                                  o.center, o.inward, PLANE_REL * self.scale, MAX_UNION_CELLS,
-                                                  float(rtol), int(max_points), gn, gw)
+        hidden, status, n_points, capped = cell_pairs(self.quads, self.normals, i, j, starts, occ, o.polys,
+                                                      o.normal, o.center, o.inward, PLANE_REL * self.scale,
+                                                      MAX_UNION_CELLS, float(rtol), int(max_points), gn, gw)
         self.n_exact_rows += int(n_points.sum())
-        return hidden, ok, capped
+        return hidden, status, capped
 
     def _areas(self) -> np.ndarray:
         """(n,) patch areas."""
