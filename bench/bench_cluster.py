@@ -62,10 +62,10 @@ def child(case: str, size: float, preset: str) -> dict:
                    estimate_mb=_memory.fill_bytes(scene.n_patches) / 2**20)
     elif case.startswith("workers="):
         from radiosity.methods.uniform.cluster import FillProblem, cluster_client, fill_matrix
-        from radiosity.solve import _fill_settings, _inactive, _view_factor_options
+        from radiosity.solve import _fill_settings, _view_factor_options
 
         options = _view_factor_options(preset, {"cache": False})
-        problem = FillProblem.from_scene(scene, _fill_settings(options), ~_inactive(scene))
+        problem = FillProblem.from_scene(scene, _fill_settings(options), ~scene.patch_inactive)
         t0 = time.perf_counter()
         with cluster_client(workers=int(case.split("=")[1])) as client:
             client.run(lambda: __import__("radiosity.methods.uniform.assembly"))  # imports (numba cache) in the start-up

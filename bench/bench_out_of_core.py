@@ -45,12 +45,12 @@ def fill(size: float, preset: str, shards: Path) -> dict:
     from radiosity.methods.uniform.cluster import FillProblem
     from radiosity.options import Options
     from radiosity.methods.uniform.shards import write_shards
-    from radiosity.solve import _cut, _fill_settings, _inactive
+    from radiosity.solve import _cut, _fill_settings
 
     t0 = time.perf_counter()
     options = Options.from_preset(preset, max_patch_size=size, cache=False)
     cut = _cut(radiosity.load_scene(radiosity.bundled_scene("cornell_box")), options)
-    problem = FillProblem.from_scene(cut, _fill_settings(options), ~_inactive(cut))
+    problem = FillProblem.from_scene(cut, _fill_settings(options), ~cut.patch_inactive)
     budget, source = _memory.budget_bytes()
     pairs = _memory.plan_fill_block(cut.n_patches)
     print(f"{cut.n_patches} patches; budget {_memory.format_bytes(budget)} ({source}); in-memory fill estimate "

@@ -94,7 +94,6 @@ def measure(path: str, preset: str, method: str = "auto") -> dict:
     import warnings
 
     import radiosity
-    from radiosity.solve import _inactive
 
     scene = radiosity.load_scene(path)
     t0 = time.perf_counter()
@@ -103,7 +102,7 @@ def measure(path: str, preset: str, method: str = "auto") -> dict:
         solution = radiosity.solve(scene, preset=preset, cache=False, method=method)
     wall = time.perf_counter() - t0
     cut = solution.scene
-    active = ~_inactive(cut)
+    active = ~cut.patch_inactive
     # F @ 1, not F.sum: a hierarchical solution's F is a LinearOperator over its leaves
     rows = np.asarray(solution.F @ np.ones(cut.n_patches)).ravel()[active]
     e = solution.energy

@@ -254,9 +254,7 @@ def exchange(scene: Scene, *, emissivity: Condition, temperature: Condition | No
 
 def _active(scene: Scene) -> np.ndarray:
     """Patches taking part: not View3D obstructions, not covered by a contact (as solve does)."""
-    from .solve import _inactive
-
-    return ~_inactive(scene)
+    return ~scene.patch_inactive
 
 
 def _note_inactive(scene: Scene, active: np.ndarray) -> None:

@@ -91,6 +91,13 @@ class Scene:
     def n_patches(self) -> int:
         return len(self.patch_quads)
 
+    @property
+    def patch_inactive(self) -> np.ndarray:
+        """(n,) bool: patches that exchange no light, View3D obstructions and hidden regions
+        (under a block, behind a light). The solves leave them out; their radiosity is their
+        own emission."""
+        return self.patch_obstruction | self.patch_hidden
+
     @cached_property
     def _centroid_area(self) -> tuple[np.ndarray, np.ndarray]:
         return centroids_and_areas(self.patch_quads)

@@ -84,7 +84,7 @@ def prepare(scene: Scene, options: Options) -> Prepared:
     settings = _fill_settings(options)
     _memory.check_fill(cut.n_patches, patch_size=cut.max_patch_size)
     cache = FormFactorCache.default() if options.cache else None
-    inactive = _inactive(cut)
+    inactive = cut.patch_inactive
     key = _fill_key(cut.geometry_hash, inactive)
     if cache is not None:
         hit = cache.load(key, settings)
@@ -195,7 +195,7 @@ def _solve_centred(scene: Scene, options: Options) -> Solution:
     prepared = prepare(cut, options)  # cut already: prepare's own cut is a no-op
     prepared.timings["patches"] += cut_seconds
     cut = prepared.scene
-    filled = _without(prepared.F, _inactive(cut))
+    filled = _without(prepared.F, cut.patch_inactive)
     # rows above 1 would create light (escaped < 0): scale them to 1, reciprocity kept
     F, n_bounded = bound_rows(filled, cut.patch_area)
     _memory.check_solve(F.shape[0], F.nnz, options.solver)
@@ -236,7 +236,7 @@ def _solve_out_of_core(cut, options, refusal: MemoryBudgetError, timings: dict[s
     budget, source = _memory.budget_bytes()
     disk = _memory.check_shard_space(cut.n_patches, tempfile.gettempdir())
     folder = Path(tempfile.mkdtemp(prefix="radiosity-F-"))
-    inactive = _inactive(cut)
+    inactive = cut.patch_inactive
     problem = FillProblem.from_scene(cut, _fill_settings(options), ~inactive)
     update, close = _progress_bar(options.progress, cut.n_patches, "form factors (out of core)")
     try:
@@ -283,7 +283,7 @@ def _auto_method(cut: Scene, options: Options) -> tuple[str, str]:
         return "hierarchical", (f"method auto: hierarchical, since the uniform fill would pair {cut.n_patches:,} "
                                 f"patches ({pairs:.2g} pairs > {AUTO_MAX_PAIRS:.2g}, up to {need}); "
                                 f"--method uniform overrides")
-    active = ~_inactive(cut)
+    active = ~cut.patch_inactive
     if active.sum() < AUTO_SAMPLE_MIN:
         return "uniform", ""
     from .methods.uniform.estimate import estimate_fill
@@ -315,15 +315,6 @@ def _fill_key(geometry_hash: str, inactive: np.ndarray) -> str:
         return geometry_hash
     digest = hashlib.sha256(geometry_hash.encode() + np.packbits(inactive).tobytes())
     return digest.hexdigest()[:32]
-
-
-def _inactive(scene: Scene) -> np.ndarray:
-    """Patches left out of the system: obstructions, and hidden regions (under a block, behind
-    a light) that can neither receive nor send light; their radiosity is their own emission."""
-    hidden = getattr(scene, "patch_hidden", None)
-    if hidden is None or len(hidden) != scene.n_patches:
-        return scene.patch_obstruction
-    return scene.patch_obstruction | hidden
 
 
 def _balance(F, scene: Scene, radiosity: np.ndarray) -> dict[str, list[float]]:
@@ -394,7 +385,7 @@ def write_view_factors(scene: Scene, path, *, preset: str = "default", pairs_per
     _memory.check_shard_space(cut.n_patches, path, "write them to a larger disk, or use larger patches "
                                                    "(--max-patch-size)")
     settings = _fill_settings(options)
-    problem = FillProblem.from_scene(cut, settings, ~_inactive(cut))
+    problem = FillProblem.from_scene(cut, settings, ~cut.patch_inactive)
     update, close = _progress_bar(options.progress, cut.n_patches, "form factors")
     try:
         with cluster_client(options.workers, options.scheduler) as client:
@@ -465,7 +456,7 @@ def compute_view_factors(scene: Scene, *, preset: str = "default", enforce: str 
     scene, origin = scene.centred()  # far from the origin, coordinates lose the digits contacts need
     prepared = prepare(scene, options)
     cut = prepared.scene
-    active = ~_inactive(cut)
+    active = ~cut.patch_inactive
     F = _without(prepared.F, ~active)
     settings = _stored_settings(preset, options)
     if enforce == "closure" and not force:

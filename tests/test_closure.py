@@ -172,12 +172,12 @@ CORPUS_ROOM = __import__("pathlib").Path(__file__).parent / "data" / "corpus" / 
 
 def _rows(preset: str, **overrides) -> np.ndarray:
     from radiosity.options import Options
-    from radiosity.solve import _inactive, prepare
+    from radiosity.solve import prepare
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", radiosity.RadiosityWarning)
         prepared = prepare(radiosity.load_scene(CORPUS_ROOM), Options.from_preset(preset, cache=False, **overrides))
-    active = ~_inactive(prepared.scene)
+    active = ~prepared.scene.patch_inactive
     return np.asarray(prepared.F.sum(axis=1)).ravel()[active]
 
 

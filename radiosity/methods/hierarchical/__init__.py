@@ -57,11 +57,6 @@ def _roots(scene: Scene, options: Options) -> Scene:
     return scene.resubdivided(options.max_patch_size)
 
 
-def _inactive(scene: Scene) -> np.ndarray:
-    """Patches that exchange no light: obstructions and hidden patches (as in the uniform solve)."""
-    return scene.patch_obstruction | scene.patch_hidden
-
-
 def build_hierarchy(scene: Scene, options: Options, *, clusters: bool | None = None) -> Hierarchy:
     """The (unrefined) hierarchy of a scene under ``options`` (for tests and benches).
 
@@ -72,7 +67,7 @@ def build_hierarchy(scene: Scene, options: Options, *, clusters: bool | None = N
     size = min_element_size(scene, options)
     visibility = Visibility(scene.patch_quads, scene.patch_normal, scene.patch_object, scene.scale,
                             samples=options.visibility_samples, max_samples=options.visibility_max_samples)
-    return Hierarchy(scene.patch_quads, scene.patch_normal, scene.reflectance, scene.emission, ~_inactive(scene),
+    return Hierarchy(scene.patch_quads, scene.patch_normal, scene.reflectance, scene.emission, ~scene.patch_inactive,
                      visibility, min_size=size, tolerance=options.link_tolerance,
                      leaf_tolerance=options.leaf_tolerance,
                      formfactor_rtol=options.formfactor_rtol, exact=options.visibility != "rays",
