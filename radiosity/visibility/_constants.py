@@ -140,6 +140,12 @@ SATURATED_REL = 1e-9
 # F(wall -> wall) 1.6e-5 high). The prisms gain nothing past 3 (15 s -> 36 s at 5). In the
 # Cornell box's default fill (all levels) it cost over 10 minutes and 10 GB instead of seconds.
 SHADOW_PENUMBRA_DEPTH = 6
+# ... and in looser fills (the presets, view_factors' --tolerance 1e-5 and above) to this many:
+# points all lit or all dark at the root miss a penumbra between them at any tolerance. A floor
+# sliver 2.2 m long touching a cylinder's foot saw the north wall 1.5e-3 high at tolerance 1e-4
+# (the cylinder's shadow on the sliver passed between the root's points); with one level,
+# 2e-5 (session 25).
+SHADOW_PENUMBRA_DEPTH_LOOSE = 1
 # ... and there the squares may split one level further than SHADOW_MAX_DEPTH (1/128 of a side:
 # 8 mm on a 1 m wall). A closed room of 8 floating cubes, one patch a face, has 26-40 cube faces
 # behind each wall-to-wall pair (more than the cells take), whose kinks (where a shadow starts,
