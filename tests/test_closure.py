@@ -327,6 +327,31 @@ def test_shadow_cells_out_of_points_say_so_and_the_fill_recovers():
     np.testing.assert_allclose(unocc - hidden[0], 0.0158445, atol=1e-7)  # the same from the wall's side
 
 
+def test_looser_fills_find_a_penumbra_between_the_roots_points():
+    """A floor sliver 2.2 m long touching a faceted cylinder's foot along a 2 cm edge, and the
+    wall behind the cylinder: at tolerance 1e-4 the cylinder's shadow on the sliver passed
+    between the root squares' points, and F(sliver -> wall) came out 1.5e-3 high (15 times the
+    tolerance). One level of the penumbra test in looser fills finds it."""
+    import trimesh
+
+    from helpers import fill
+    from radiosity.methods.uniform.assembly import FillSettings
+
+    cylinder = trimesh.creation.cylinder(radius=0.3, height=1.2, sections=24)
+    cylinder.apply_translation([1.8, 2.0, 0.6])
+    faces = cylinder.triangles[cylinder.face_normals[:, 2] > -0.5]  # the foot stands on the floor
+    faces = np.concatenate([faces, faces[:, -1:]], axis=1)  # triangles as quads
+    t = np.radians(-15.0)
+    sliver = np.array([[3.0, 4.0, 0.0], [2.1, 2.0, 0.0], [1.8 + 0.3 * np.cos(t), 2.0 + 0.3 * np.sin(t), 0.0]])
+    sliver = np.vstack([sliver, sliver[-1:]])
+    wall = np.array([[0.0, 4.0, 0.0], [3.0, 4.0, 0.0], [3.0, 4.0, 2.5], [0.0, 4.0, 2.5]])
+    parts = [sliver[None], wall[None], faces]
+    tight, _, _ = fill(parts, FillSettings(formfactor_rtol=1e-6, visibility_rtol=1e-6))
+    loose, _, _ = fill(parts, FillSettings(formfactor_rtol=1e-4, visibility_rtol=1e-4))
+    assert tight[0, 1] == pytest.approx(0.1652438, abs=1e-6)
+    assert abs(loose[0, 1] - tight[0, 1]) < 1e-4  # 1.5e-3 without the test
+
+
 def test_a_kink_past_the_outermost_points_is_found():
     """A cube face's factor to the ceiling of a closed room of cubes: at the third level a row of
     squares had the kink where a shadow starts between their outermost points and their side,
