@@ -171,8 +171,7 @@ def _apply_visibility(f, quads, centroid, area, i, j, visibility, settings: Fill
     from ...visibility._constants import (AUTO_EXACT_ATOL, AUTO_EXACT_OCCLUDERS, MAX_CELL_OCCLUDERS,
                                           SHADOW_ATOL_SHARE, SHADOW_ATOL_SHARE_TIGHT, SHADOW_CELL_ORDER,
                                           SHADOW_CELLS_BELOW, SHADOW_MAX_DEPTH, SHADOW_PENUMBRA_DEPTH,
-                                          SHADOW_PENUMBRA_DEPTH_LOOSE,
-                                          SHADOW_RTOL_SHARE, SHADOW_TIGHT_MAX_DEPTH)
+                                          SHADOW_PENUMBRA_DEPTH_LOOSE, SHADOW_RTOL_SHARE, SHADOW_TIGHT_MAX_DEPTH)
 
     nz = np.flatnonzero(f > 0)
     rows, occ = _rows_of(classified[1], classified[2], nz, len(f))
@@ -237,8 +236,9 @@ def _apply_visibility(f, quads, centroid, area, i, j, visibility, settings: Fill
             flip = visibility.receive_on_source(ri, rj, sub_rows, sub_occ) & (area[ri] > 0)
             recv, src = np.where(flip, rj, ri), np.where(flip, ri, rj)
             target = atol * np.minimum(1.0, area[src] / np.where(area[recv] > 0, area[recv], 1.0))
+            penumbra = SHADOW_PENUMBRA_DEPTH if tight else SHADOW_PENUMBRA_DEPTH_LOOSE
             hidden = visibility.adaptive_hidden(recv, src, sub_rows, sub_occ, target, order=SHADOW_CELL_ORDER,
-                                                penumbra_depth=SHADOW_PENUMBRA_DEPTH if tight else SHADOW_PENUMBRA_DEPTH_LOOSE,
+                                                penumbra_depth=penumbra,
                                                 max_depth=SHADOW_TIGHT_MAX_DEPTH if tight else SHADOW_MAX_DEPTH)
             ratio = np.where(flip, area[rj] / area[ri], 1.0)  # F(i -> j) = A_j F(j -> i) / A_i
             frac[sel] = _seen_fraction(unocc, hidden * ratio)
