@@ -817,10 +817,11 @@ class Visibility:
         from x): the pair's obstructed factor is ``unoccluded - hidden``. The receiver is cut
         along the lines where the hidden polygon changes shape (``_cells_kernel``), so each
         cell's integrand is smooth and its Gauss rule (picked for ``rtol``, within about
-        ``max_points`` receiver points a pair) converges. Pairs
-        whose lines, cells or unions ran out fall back to :meth:`adaptive_hidden`, to ``rtol``
-        times ``unoccluded`` (m,), the pairs' factors (at least ``CELL_FALLBACK_ATOL``), with
-        ``penumbra_depth`` and ``max_depth``.
+        ``max_points`` receiver points a pair) converges. A pair out of points tries again with
+        ``CELL_RETRY_POINTS`` times the budget; one still not integrated tries the cells from
+        j's side (mirrored by reciprocity), and then falls back to :meth:`adaptive_hidden`, to
+        ``rtol`` times ``unoccluded`` (m,), the pairs' factors (at least ``CELL_FALLBACK_ATOL``),
+        with ``penumbra_depth`` and ``max_depth``.
         """
         i = np.ascontiguousarray(i, dtype=np.int64)
         j = np.ascontiguousarray(j, dtype=np.int64)
@@ -854,10 +855,9 @@ class Visibility:
             # its edge; its cells split that strip four ways until the budget ran out, and the
             # squares then missed it (F 2.4e-4 high); from the floor, 192 points.
             mirror, mirror_status, _ = again(bad, j, i)
-            good = bad[mirror_status == GOOD]
-            area = self._areas()
-            hidden[good] = mirror[mirror_status == GOOD] * area[j[good]] / area[i[good]]
-            bad = bad[mirror_status != GOOD]
+            good = mirror_status == GOOD
+            hidden[bad[good]] = mirror[good] * self._mirror_ratio(i[bad[good]], j[bad[good]])
+            bad = bad[~good]
         capped = np.flatnonzero((status == GOOD) & capped)
         if len(capped):
             hidden[capped] = self._settle_capped(i[capped], j[capped], *_subset_lists(starts, occ_sorted, capped),
@@ -887,12 +887,11 @@ class Visibility:
         with each other and were both 6.9e-9 off).
         """
         budget = max_points * CELL_RETRY_POINTS
-        own, own_ok, _ = self._cell_pairs(i, j, starts, occ, rtol * CAPPED_RTOL_STEP, budget)
-        coarse, coarse_ok, _ = self._cell_pairs(j, i, starts, occ, rtol, budget)
-        fine, fine_ok, _ = self._cell_pairs(j, i, starts, occ, rtol * CAPPED_RTOL_STEP, budget)
-        own_ok, coarse_ok, fine_ok = own_ok == GOOD, coarse_ok == GOOD, fine_ok == GOOD
-        area = self._areas()
-        ratio = area[j] / np.where(area[i] > 0, area[i], 1.0)
+        own, own_status, _ = self._cell_pairs(i, j, starts, occ, rtol * CAPPED_RTOL_STEP, budget)
+        coarse, coarse_status, _ = self._cell_pairs(j, i, starts, occ, rtol, budget)
+        fine, fine_status, _ = self._cell_pairs(j, i, starts, occ, rtol * CAPPED_RTOL_STEP, budget)
+        own_ok, coarse_ok, fine_ok = own_status == GOOD, coarse_status == GOOD, fine_status == GOOD
+        ratio = self._mirror_ratio(i, j)
         own_drift = np.where(own_ok, np.abs(own - first), np.inf)
         mirror_drift = np.where(coarse_ok & fine_ok, np.abs(fine - coarse) * ratio, np.inf)
         settled = np.where(own_ok, own, first)
@@ -911,6 +910,12 @@ class Visibility:
                                                       MAX_UNION_CELLS, float(rtol), int(max_points), gn, gw)
         self.n_exact_rows += int(n_points.sum())
         return hidden, status, capped
+
+    def _mirror_ratio(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        """A_j / A_i: a hidden factor integrated from j's side times this is i's (reciprocity);
+        a receiver of zero area takes A_j, against 0 hidden."""
+        area = self._areas()
+        return area[j] / np.where(area[i] > 0, area[i], 1.0)
 
     def _areas(self) -> np.ndarray:
         """(n,) patch areas."""
