@@ -352,6 +352,52 @@ def test_looser_fills_find_a_penumbra_between_the_roots_points():
     assert abs(loose[0, 1] - tight[0, 1]) < 1e-4  # 1.5e-3 without the test
 
 
+def _needle_behind_a_sphere_and_a_cylinder(first: int):
+    """The Visibility, the needle's factor to the wall unoccluded, and the (i, j, rows, occ) of a
+    floor needle 2.6 m long and 8 cm wide whose blunt end touches a faceted cylinder's foot,
+    seeing the south wall past the cylinder and a faceted sphere (58 possible occluders, more
+    than the shadow cells take); the needle's corners are listed from corner ``first``."""
+    import trimesh
+
+    from radiosity.formfactors import polygon_to_polygon
+
+    sphere = trimesh.creation.icosphere(subdivisions=2, radius=0.5)
+    sphere.apply_translation([1.0, 2.0, 0.5])
+    cylinder = trimesh.creation.cylinder(radius=0.3, height=1.2, sections=24)
+    cylinder.apply_translation([1.8, 2.0, 0.6])
+    needle = np.roll([[0.0, 0.0, 0.0], [1.5, 2.0, 0.0], [1.51022225, 2.07764571, 0.0]], -first, axis=0)
+    needle = np.vstack([needle, needle[-1:]])
+    wall = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 2.5], [3.0, 0.0, 2.5], [3.0, 0.0, 0.0]])
+    faces = np.concatenate([sphere.triangles, cylinder.triangles])
+    quads = np.concatenate([needle[None], wall[None], np.concatenate([faces, faces[:, -1:]], axis=1)])
+    groups = np.r_[0, 1, np.full(len(sphere.faces), 2), np.full(len(cylinder.faces), 3)]
+    vis = make_vis(quads, groups)
+    i, j = np.array([0]), np.array([1])
+    _, rows, occ = vis.classify(i, j)
+    return vis, polygon_to_polygon(needle, wall, rtol=1e-12), (i, j, rows, occ)
+
+
+def test_a_needle_is_cut_across_its_length():
+    """A thin floor triangle stored from a blunt corner (as the OBJ listed it) has a collapsed map
+    whose parameter lines all run along it, so the adaptive squares' cells stayed as long as it
+    is: the cylinder's shadow across its blunt end was still smeared at the deepest level, and
+    F(needle -> wall) came out 1.5e-6 high (8e-6 of it; a closed room's floor triangles, rows
+    to 1 + 2.8e-6). Collapsed at the tip (``formfactors.tip_collapsed``), the cells cut across
+    the needle, and the answer no longer depends on which corner the file lists first."""
+    from radiosity.visibility._constants import SHADOW_PENUMBRA_DEPTH, SHADOW_TIGHT_MAX_DEPTH
+
+    hidden = []
+    for first in range(3):
+        vis, unocc, pair = _needle_behind_a_sphere_and_a_cylinder(first)
+        assert len(pair[3]) > 16
+        hidden.append(vis.adaptive_hidden(*pair, 1e-6 * unocc, penumbra_depth=SHADOW_PENUMBRA_DEPTH,
+                                          max_depth=SHADOW_TIGHT_MAX_DEPTH)[0])
+    # reference: squares to 9 levels from the needle, 0.0030316619; from the wall, mirrored, at
+    # 1e-8, 0.0030316634
+    np.testing.assert_allclose(hidden, 0.0030316627, atol=1e-6 * unocc)  # 6e-9 off measured
+    assert hidden[0] == hidden[1] == hidden[2]
+
+
 def test_a_kink_past_the_outermost_points_is_found():
     """A cube face's factor to the ceiling of a closed room of cubes: at the third level a row of
     squares had the kink where a shadow starts between their outermost points and their side,

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 
 from radiosity.formfactors._quadrature import pair_factors, patch_points, split_patch_points
 from radiosity.geometry import centroids_and_areas
@@ -95,3 +98,25 @@ def test_receiver_straddling_the_source_plane():
     c, a = centroids_and_areas(quads)
     one_sided = pair_factors(quads, normals, c, a, np.array([0]), np.array([1]), rtol=1e-9)[0]
     np.testing.assert_allclose(one_sided, 0.5 * f_half, rtol=1e-8)
+
+
+@settings(max_examples=60, deadline=None)
+@given(corners=arrays(np.float64, (3, 3), elements=st.floats(-10, 10)), repeat=st.integers(0, 3))
+def test_tip_collapsed_keeps_each_triangle_and_repeats_its_sharpest_corner(corners, repeat):
+    """``tip_collapsed`` (the adaptive squares' receiver map) moves a triangle's repeated corner to
+    the one opposite its shortest edge, whichever slot the repeat was in; the triangle, its
+    winding and every quadrilateral stay as they were."""
+    from radiosity.formfactors import tip_collapsed
+    from radiosity.geometry import vector_areas
+
+    assume(len({tuple(c) for c in corners}) == 3)  # two equal corners: a segment, left alone
+    quad = np.insert(corners, repeat, corners[repeat - 1] if repeat else corners[0], axis=0)
+    square = np.array([[0.0, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0]])
+    out = tip_collapsed(np.stack([quad, square]))
+    assert np.array_equal(out[1], square)
+    tri = out[0]
+    assert np.array_equal(tri[2], tri[3])
+    assert sorted(map(tuple, tri[:3])) == sorted(map(tuple, corners))
+    np.testing.assert_allclose(vector_areas(tri[None])[0], vector_areas(quad[None])[0], atol=1e-9)
+    edges = np.linalg.norm(tri[[1, 2, 0]] - tri[[0, 1, 2]], axis=1)  # ab, b-tip, tip-a
+    assert edges[0] <= edges[1:].min() * (1 + 1e-12)

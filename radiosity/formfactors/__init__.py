@@ -15,7 +15,7 @@ See ``docs/formfactors.md``.
 from ._closed_form import lambert_indexed, lambert_pairs, point_to_polygon, point_to_polygons
 from ._polygon_pairs import polygon_to_polygon
 from ._quadrature import (gauss_legendre_01, pair_factors, patch_points, rect_points, split_patch_points,
-                          square_cell_corners, square_cell_points)
+                          square_cell_corners, square_cell_points, tip_collapsed)
 
 __all__ = [
     "point_to_polygon",
@@ -30,4 +30,5 @@ __all__ = [
     "gauss_legendre_01",
     "square_cell_corners",
     "square_cell_points",
+    "tip_collapsed",
 ]

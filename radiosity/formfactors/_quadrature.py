@@ -114,6 +114,31 @@ def square_cell_corners(quads: np.ndarray, u0: np.ndarray, v0: np.ndarray, size:
     return _map_square(quads, u, v)[0]
 
 
+def tip_collapsed(quads: np.ndarray) -> np.ndarray:
+    """(n, 4, 3) copy of ``quads`` whose triangles repeat the vertex opposite their shortest edge.
+
+    The collapsed map of a triangle (a, b, c, c) fans its u-lines out of c and runs its v-lines
+    parallel to ab, so parameter cells cut across the triangle only along ab. Collapsed at a
+    needle's sharp tip, its v-lines cross the needle and about square cells fit along it
+    (``Visibility._root_cells``); collapsed at a blunt corner, every line of both families runs
+    along the needle and the cells stay as long as the needle is long. A floor triangle 2.6 m
+    long and 8 cm wide, touching a cylinder's foot in a closed room, then missed 2.8e-6 of its
+    row at the squares' deepest level; collapsed at its tip, it closes to 1e-8 a level earlier.
+    Quads and triangles with their tip already collapsed are returned unchanged.
+    """
+    q = np.array(quads, dtype=float)
+    repeat = np.all(q == np.roll(q, -1, axis=1), axis=2)  # vertex k is vertex k + 1
+    tri = np.flatnonzero(repeat.sum(axis=1) == 1)
+    if not len(tri):
+        return q
+    first = (np.argmax(repeat[tri], axis=1)[:, None] + np.arange(1, 4)) % 4
+    v = q[tri[:, None], first]  # the three corners in their cyclic order
+    opposite = np.linalg.norm(v[:, [1, 2, 0]] - v[:, [2, 0, 1]], axis=2)
+    tip = np.argmin(opposite, axis=1)
+    q[tri] = v[np.arange(len(tri))[:, None], (tip[:, None] + np.array([1, 2, 0, 0])) % 3]
+    return q
+
+
 def _cell_sides(size: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The (u, v) sides of parameter cells given as one side each (squares) or two."""
     size = np.asarray(size, dtype=float)

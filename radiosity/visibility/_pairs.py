@@ -32,7 +32,8 @@ from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from .. import _tol
 from ..geometry import centroids_and_areas, polygon_normals
-from ..formfactors import gauss_legendre_01, pair_factors, patch_points, square_cell_corners, square_cell_points
+from ..formfactors import (gauss_legendre_01, pair_factors, patch_points, square_cell_corners, square_cell_points,
+                           tip_collapsed)
 from . import _occluders
 from ._constants import (BLIND_ORDER, CAPPED_RTOL_STEP, CELL_FALLBACK_ATOL, CELL_RETRY_POINTS, CHUNK_CELL_PAIRS,
                          CHUNK_CLASSIFY, CHUNK_SHADOWS, CHUNK_SQUARE_PAIRS, CHUNK_TRIPLES, GOOD, KINK_BAND,
@@ -240,6 +241,8 @@ class Visibility:
         self.occluders = build_occluders(quads, normals, np.asarray(groups), mask, scale)
         self._lo = quads.min(axis=1)
         self._hi = quads.max(axis=1)
+        # the receivers as adaptive_hidden's cells map them: needles collapsed at their tips
+        self._cell_quads = tip_collapsed(quads)
         self._tracer = None
         self._area = None  # patch areas, on first use (receive_on_source, _settle_capped)
         self.n_rays = 0
@@ -641,7 +644,7 @@ class Visibility:
         Returns each cell's pair, (u, v) corner, (u, v) sides and its longest side as a share of
         its patch's longest side (its share of the pair's tolerance).
         """
-        q = self.quads[i]
+        q = self._cell_quads[i]
         side = lambda a, b: np.linalg.norm(q[:, b] - q[:, a], axis=1)  # noqa: E731
         lu = np.maximum(side(0, 1), side(3, 2))
         lv = np.maximum(side(0, 3), side(1, 2))
@@ -713,7 +716,7 @@ class Visibility:
             a, b = starts[s], starts[e]
             if a == b:
                 continue
-            squares = square_cell_corners(self.quads[i[pair[s:e]]], corner[s:e, 0], corner[s:e, 1], size[s:e])
+            squares = square_cell_corners(self._cell_quads[i[pair[s:e]]], corner[s:e, 0], corner[s:e, 1], size[s:e])
             state[a:b] = _occluders.classify_rows(self.occluders, squares[row[a:b] - s],
                                                   self.quads[j[pair[row[a:b]]]], occ[a:b], self.scale)
         full = state == FULL
@@ -737,7 +740,7 @@ class Visibility:
         for s in range(0, len(pair), step):
             e = min(len(pair), s + step)
             p = pair[s:e]
-            pts, w = square_cell_points(self.quads[i[p]], corner[s:e, 0], corner[s:e, 1], size[s:e], order)
+            pts, w = square_cell_points(self._cell_quads[i[p]], corner[s:e, 0], corner[s:e, 1], size[s:e], order)
             unocc, values[s:e] = self._points_hidden(pts, i[p], j[p], lists, np.arange(s, e))
             out[s:e] = (values[s:e] * w).sum(axis=1)
             area[s:e] = w.sum(axis=1)
@@ -754,7 +757,7 @@ class Visibility:
         for s in range(0, len(pair), step):
             e = min(len(pair), s + step)
             p = pair[s:e]
-            pts = square_cell_corners(self.quads[i[p]], corner[s:e, 0], corner[s:e, 1], size[s:e])
+            pts = square_cell_corners(self._cell_quads[i[p]], corner[s:e, 0], corner[s:e, 1], size[s:e])
             out[s:e] = self._points_hidden(pts, i[p], j[p], lists, cells[s:e])[1]
         return out
 
@@ -766,7 +769,7 @@ class Visibility:
         if not len(pair):
             return np.zeros(0, bool)
         starts, cell_occ = _subset_lists(*lists, cells)
-        corners = square_cell_corners(self.quads[i[pair]], corner[:, 0], corner[:, 1], size)
+        corners = square_cell_corners(self._cell_quads[i[pair]], corner[:, 0], corner[:, 1], size)
         o = self.occluders
         return covered_squares(np.ascontiguousarray(corners), corners.mean(axis=1), self.normals[i[pair]],
                                self.quads[j[pair]], self.normals[j[pair]], starts, cell_occ, o.polys, o.normal,
@@ -777,7 +780,7 @@ class Visibility:
         cells' areas, each within about ``allowed`` of it (``estimate``: a first value of it).
 
         One call of the area kernel per decade of relative tolerance, from 1e-3 to 1e-9."""
-        corners = square_cell_corners(self.quads[i[pair]], corner[:, 0], corner[:, 1], size)
+        corners = square_cell_corners(self._cell_quads[i[pair]], corner[:, 0], corner[:, 1], size)
         centroid, area = centroids_and_areas(corners)
         ratio = allowed / np.maximum(np.abs(estimate), np.finfo(float).tiny)
         decade = np.clip(np.floor(np.log10(np.maximum(ratio, 1e-300))), -9, -3)

@@ -41,8 +41,10 @@ FORMAT_VERSION = 1
 # for shadows between their points to 6 levels and split to 7 (SHADOW_TIGHT_MAX_DEPTH), and shadow
 # cells whose grading was capped are settled on both sides (Visibility._settle_capped). 7: an
 # occluder whose crossings lie inside it or on its edges hides the whole pair, coplanar occluders
-# of different objects merge, squares keep their own occluders (session 21).
-FILL_VERSION = 7
+# of different objects merge, squares keep their own occluders (session 21). 8: shadow cells out
+# of points try the source's side, looser fills test one level for penumbrae (session 25), and
+# the squares cut needle triangles from their tips (formfactors.tip_collapsed, session 26).
+FILL_VERSION = 8
 ENV_SIZE = "RADIOSITY_CACHE_SIZE"
 DEFAULT_LIMIT = 2 << 30  # 2 GiB: a few hundred Cornell-box-sized matrices, a handful of big ones
 
