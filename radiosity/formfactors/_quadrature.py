@@ -122,9 +122,10 @@ def tip_collapsed(quads: np.ndarray) -> np.ndarray:
     needle's sharp tip, its v-lines cross the needle and about square cells fit along it
     (``Visibility._root_cells``); collapsed at a blunt corner, every line of both families runs
     along the needle and the cells stay as long as the needle is long. A floor triangle 2.6 m
-    long and 8 cm wide, touching a cylinder's foot in a closed room, then missed 2.8e-6 of its
-    row at the squares' deepest level; collapsed at its tip, it closes to 1e-8 a level earlier.
-    Quads and triangles with their tip already collapsed are returned unchanged.
+    long and 8 cm wide, touching a cylinder's foot in a closed room, summed to 1 + 2.8e-6 with
+    squares to 7 levels, its squared pairs still moving by 2e-6 at 8; collapsed at its tip, they
+    agree to 1e-8 from 6 levels to 9 and the row closes. Quads, and triangles already collapsed
+    at their tip, keep their corners.
     """
     q = np.array(quads, dtype=float)
     repeat = np.all(q == np.roll(q, -1, axis=1), axis=2)  # vertex k is vertex k + 1
