@@ -327,20 +327,30 @@ def test_shadow_cells_out_of_points_say_so_and_the_fill_recovers():
     np.testing.assert_allclose(unocc - hidden[0], 0.0158445, atol=1e-7)  # the same from the wall's side
 
 
+def _room_cylinder():
+    """The sphere room's faceted cylinder (24 sections, 0.3 m radius, 1.2 m high) on its floor."""
+    import trimesh
+
+    cylinder = trimesh.creation.cylinder(radius=0.3, height=1.2, sections=24)
+    cylinder.apply_translation([1.8, 2.0, 0.6])
+    return cylinder
+
+
+def _as_quads(triangles):
+    """(m, 4, 3) triangles (m, 3, 3) as patches: the last corner repeated."""
+    return np.concatenate([triangles, triangles[:, -1:]], axis=1)
+
+
 def test_looser_fills_find_a_penumbra_between_the_roots_points():
     """A floor sliver 2.2 m long touching a faceted cylinder's foot along a 2 cm edge, and the
     wall behind the cylinder: at tolerance 1e-4 the cylinder's shadow on the sliver passed
     between the root squares' points, and F(sliver -> wall) came out 1.5e-3 high (15 times the
     tolerance). One level of the penumbra test in looser fills finds it."""
-    import trimesh
-
     from helpers import fill
     from radiosity.methods.uniform.assembly import FillSettings
 
-    cylinder = trimesh.creation.cylinder(radius=0.3, height=1.2, sections=24)
-    cylinder.apply_translation([1.8, 2.0, 0.6])
-    faces = cylinder.triangles[cylinder.face_normals[:, 2] > -0.5]  # the foot stands on the floor
-    faces = np.concatenate([faces, faces[:, -1:]], axis=1)  # triangles as quads
+    cylinder = _room_cylinder()
+    faces = _as_quads(cylinder.triangles[cylinder.face_normals[:, 2] > -0.5])  # the foot stands on the floor
     t = np.radians(-15.0)
     sliver = np.array([[3.0, 4.0, 0.0], [2.1, 2.0, 0.0], [1.8 + 0.3 * np.cos(t), 2.0 + 0.3 * np.sin(t), 0.0]])
     sliver = np.vstack([sliver, sliver[-1:]])
@@ -363,13 +373,12 @@ def _needle_behind_a_sphere_and_a_cylinder(first: int):
 
     sphere = trimesh.creation.icosphere(subdivisions=2, radius=0.5)
     sphere.apply_translation([1.0, 2.0, 0.5])
-    cylinder = trimesh.creation.cylinder(radius=0.3, height=1.2, sections=24)
-    cylinder.apply_translation([1.8, 2.0, 0.6])
+    cylinder = _room_cylinder()
     needle = np.roll([[0.0, 0.0, 0.0], [1.5, 2.0, 0.0], [1.51022225, 2.07764571, 0.0]], -first, axis=0)
     needle = np.vstack([needle, needle[-1:]])
     wall = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 2.5], [3.0, 0.0, 2.5], [3.0, 0.0, 0.0]])
-    faces = np.concatenate([sphere.triangles, cylinder.triangles])
-    quads = np.concatenate([needle[None], wall[None], np.concatenate([faces, faces[:, -1:]], axis=1)])
+    faces = _as_quads(np.concatenate([sphere.triangles, cylinder.triangles]))
+    quads = np.concatenate([needle[None], wall[None], faces])
     groups = np.r_[0, 1, np.full(len(sphere.faces), 2), np.full(len(cylinder.faces), 3)]
     vis = make_vis(quads, groups)
     i, j = np.array([0]), np.array([1])

@@ -241,8 +241,6 @@ class Visibility:
         self.occluders = build_occluders(quads, normals, np.asarray(groups), mask, scale)
         self._lo = quads.min(axis=1)
         self._hi = quads.max(axis=1)
-        # the receivers as adaptive_hidden's cells map them: needles collapsed at their tips
-        self._cell_quads = tip_collapsed(quads)
         self._tracer = None
         self._area = None  # patch areas, on first use (receive_on_source, _settle_capped)
         self.n_rays = 0
@@ -919,6 +917,13 @@ class Visibility:
         a receiver of zero area takes A_j, against 0 hidden."""
         area = self._areas()
         return area[j] / np.where(area[i] > 0, area[i], 1.0)
+
+    @functools.cached_property
+    def _cell_quads(self) -> np.ndarray:
+        """(n, 4, 3) the receivers as :meth:`adaptive_hidden`'s cells map them: needles collapsed
+        at their tips (:func:`tip_collapsed`); on first use, since fills that never reach the
+        squares (rays, the shadow cells alone) need no copy of the patches."""
+        return tip_collapsed(self.quads)
 
     def _areas(self) -> np.ndarray:
         """(n,) patch areas."""
