@@ -434,6 +434,34 @@ def test_exact_fraction_falls_back_to_shapely_unions(monkeypatch):
     np.testing.assert_allclose(fallback, compiled, rtol=1e-9, atol=1e-12)
 
 
+def test_exact_fraction_of_a_few_pairs_costs_memory_for_those_pairs_only():
+    """Exact shadows of two pairs in a scene of 20,000 patches: the Gauss points of the two
+    receivers, not of every patch. Each call placed order**2 points on every patch: the blind
+    pairs' order-16 rule took a terrain of a million triangles to 19 GB."""
+    import tracemalloc
+
+    quads, groups = boxes_scene()
+    far = np.array([rect(0, 0.01, 0, 0.01, 0)]) + np.column_stack([np.arange(20_000) * 0.02, np.full(20_000, 50.0),
+                                                                  np.zeros(20_000)])[:, None, :]
+    vis = make_vis(np.concatenate([quads, far]), np.r_[groups, np.arange(20_000) + groups.max() + 1])
+    i, j = all_pairs(len(quads))
+    status, rows, occ = vis.classify(i, j)
+    alone = make_vis(quads, groups)
+    maybe = np.flatnonzero(status == MAYBE)
+    coarse = alone.exact_fraction(i, j, rows, occ, 3)
+    part = maybe[(coarse[maybe] > 0) & (coarse[maybe] < 1)][:2]  # two partly hidden pairs
+    keep = np.isin(rows, part)
+    rows = np.searchsorted(part, rows[keep])
+    expected = alone.exact_fraction(i[part], j[part], rows, occ[keep], 16)
+    tracemalloc.start()
+    got = vis.exact_fraction(i[part], j[part], rows, occ[keep], 16)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 5e6  # every patch's points: 20,006 x 256 x 3 doubles, 123 MB
+    np.testing.assert_array_equal(got, expected)
+    assert ((0 < got) & (got < 1)).all()
+
+
 def _random_quad(rng, center, size):
     """A random planar convex quad (a rotated, sheared rectangle) around center."""
     basis, _ = np.linalg.qr(rng.normal(size=(3, 3)))
