@@ -80,6 +80,19 @@ def test_vertex_values_lie_within_patch_values():
     assert vertex_b.max() <= sol.radiosity.max() + 1e-12
 
 
+def test_patches_grouped_by_label_from_one_sort():
+    """The per-face and per-object groups of the vertex mesh and the object means: the indices
+    of each label in ascending order, as a mask per label gave them, for labels with gaps."""
+    from radiosity.solution import _members
+
+    labels = np.random.default_rng(3).choice([0, 2, 3, 7, 40], size=1000)
+    groups = _members(labels)
+    assert sorted(groups) == [0, 2, 3, 7, 40]
+    for label, members in groups.items():
+        np.testing.assert_array_equal(members, np.flatnonzero(labels == label))
+    assert _members(np.zeros(0, np.int64)) == {}
+
+
 def test_vertex_mesh_has_no_t_junctions_and_ignores_hidden_patches():
     """Within each OBJ face no vertex lies inside another patch's edge (imprinted cells are
     cut differently on either side of an outline), and vertices on the rim of a hidden region
