@@ -293,6 +293,31 @@ def test_two_area_lanes_read_in_place_or_copied_alike():
     assert np.array_equal(in_place[shuffle], copied)
 
 
+@pytest.mark.parametrize("rtol, two_area_orders", [(1e-3, 2), (1e-6, 0)])
+def test_each_pair_s_factor_is_its_own_whatever_pairs_it_comes_with(rtol, two_area_orders):
+    """The fill's blocks follow the clock (``assembly.BLOCK_SECONDS``), so a pair must get the
+    same bits alone, in any batch and in any order. A run of pairs facing one source took its
+    largest two-area order, and the raw sum only where every pair allowed it: the bundled box's
+    F changed in the 8th digit between the first solve of a process and the next."""
+    import radiosity
+
+    scene = radiosity.load_scene(radiosity.bundled_scene("cornell_box"), max_patch_size=0.11)
+    quads, normals, centroid, area = scene.patch_quads, scene.patch_normal, scene.patch_centroid, scene.patch_area
+    i, j, order, two = block_pairs(quads, normals, centroid, area, np.arange(scene.n_patches), None, rtol,
+                                   two_area_rtol=rtol)
+
+    def factors(sel):
+        return once_factors(quads, normals, centroid, area, i[sel], j[sel], rtol=rtol, max_points=4096,
+                            order=order[sel], two_area=True, two_order=two[sel])
+
+    whole = factors(np.arange(len(i)))
+    assert len(np.unique(two[two > 0])) == two_area_orders  # at 1e-3, runs that mix two-area orders
+    batches = np.concatenate([factors(np.arange(s, min(len(i), s + 300))) for s in range(0, len(i), 300)])
+    assert np.array_equal(batches, whole)
+    shuffled = np.random.default_rng(0).permutation(len(i))
+    assert np.array_equal(factors(shuffled), whole[shuffled])
+
+
 @pytest.mark.parametrize("rtol", [1e-4, 1e-6, 1e-8])
 def test_a_touching_needle_the_point_budget_stops_short_is_integrated_again(rtol):
     """A floor sliver 2.2 m long touching a cylinder's side along its 2 cm base (a room of the

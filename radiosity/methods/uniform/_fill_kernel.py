@@ -847,67 +847,76 @@ def _separated_kernel(quads, normals, centroid, area, radius, rec, src, order, s
     """out[t] = F(rec[t] -> src[t]) for pairs sorted by source, one task per run in ``starts``.
 
     Pairs whose source has a two-area order (:func:`_two_area_order`; none if ``need_src`` has
-    one entry) take the Gauss rule on the source too, at the run's largest such order; the
-    others Lambert's closed form. Their lanes come after the Lambert lanes. ``has_two``: the
-    orders are given in ``two`` (the pair listing's, the same numbers)."""
+    one entry) take the Gauss rule on the source too, at their own order; the others Lambert's
+    closed form, by the raw sum where the pair's own distance / source size allows
+    (``raw_below``). A pair's lanes go with the lanes of the same rule (raw, far form, two-area
+    order 1, 2, ...), so its value depends on the pair alone, not on the run it shares: until
+    2026-12-06 a run took its largest order and the raw sum only if all its pairs allowed it,
+    and the fill's F changed in the 8th digit with the block sizes, which follow the clock.
+    ``has_two``: the orders are given in ``two`` (the pair listing's, the same numbers)."""
     k = quads.shape[1]
     max_q = len(need_src) - 1
     for task in _prange(len(starts) - 1):
         t0, t1 = starts[task], starts[task + 1]
         b = src[t0]
-        n_lam, n_two, q_run = 0, 0, 0
-        widest = 0.0  # the Lambert pairs' largest distance / source size: the raw sum's digit loss
-        qs = np.zeros(t1 - t0, np.int64)
+        # each pair's rule: -1 raw sum, 0 Lambert's far-capable form, q > 0 two-area order q
+        rule = np.zeros(t1 - t0, np.int64)
+        lanes = np.zeros(max_q + 2, np.int64)  # lanes per rule, rule r at index r + 1
         for t in range(t0, t1):
             a = rec[t]
             if has_two:
                 q = two[t]
             else:
                 q = _two_area_order(quads, normals, centroid, radius, a, b, need_src) if max_q > 0 else 0
-            qs[t - t0] = q
-            if q > 0:
-                n_two += order[t] * order[t]
-                q_run = max(q_run, q)
-                continue
-            n_lam += order[t] * order[t]
-            d0, d1, d2 = centroid[b, 0] - centroid[a, 0], centroid[b, 1] - centroid[a, 1], centroid[b, 2] - centroid[a, 2]
-            widest = max(widest, (np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) + radius[a]) / max(radius[b], _TINY))
-        run_mode = 1 if widest <= raw_below else mode
-        n = n_lam + n_two
-        if n_lam == 0 and _side_by_side(slot, rec, order, t0, t1):
-            _two_area_in_table(quads, normals, centroid, area, rec, src, order, t0, t1, q_run, nodes, weights,
+            if q == 0:
+                d0 = centroid[b, 0] - centroid[a, 0]
+                d1 = centroid[b, 1] - centroid[a, 1]
+                d2 = centroid[b, 2] - centroid[a, 2]
+                ratio = (np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) + radius[a]) / max(radius[b], _TINY)
+                q = -1 if ratio <= raw_below else 0
+            rule[t - t0] = q
+            lanes[q + 1] += order[t] * order[t]
+        n = 0
+        first = np.empty(max_q + 2, np.int64)
+        for r in range(max_q + 2):
+            first[r] = n
+            n += lanes[r]
+        only = rule[0]
+        for t in range(t0, t1):
+            if rule[t - t0] != only:
+                only = -2
+        if only > 0 and _side_by_side(slot, rec, order, t0, t1):
+            _two_area_in_table(quads, normals, centroid, area, rec, src, order, t0, t1, only, nodes, weights,
                                slot[rec[t0], order[t0]], TP, TN, TW, out)
             continue
         PT, NT = np.empty((3, n)), np.empty((3, n))
         W, vals = np.empty(n), np.empty(n)
-        pos_lam, pos_two = 0, n_lam
+        pos = first.copy()
         for t in range(t0, t1):
-            at, count = slot[rec[t], order[t]], order[t] * order[t]
-            if qs[t - t0] > 0:
-                pos_two = _copy_points(TP, TN, TW, at, count, PT, NT, W, pos_two)
-            else:
-                pos_lam = _copy_points(TP, TN, TW, at, count, PT, NT, W, pos_lam)
-        if n_lam > 0:
-            g = np.empty(_G_SIZE)
-            w, h, wc = np.empty((k, 3)), np.empty(k), np.empty((2 * k, 3))
-            for lo in range(0, n_lam, _SRC_LANES):
-                _source_block(PT, NT, lo, min(_SRC_LANES, n_lam - lo), quads, b, run_mode, vals, g, w, h, wc)
-        if n_two > 0:
-            SP, SN, SW = np.empty((3, q_run * q_run)), np.empty((3, q_run * q_run)), np.empty(q_run * q_run)
-            _put_points(quads, normals, centroid, area, b, q_run, nodes, weights, SP, SN, SW, 0)
-            _two_area_lanes(PT[0, n_lam:], PT[1, n_lam:], PT[2, n_lam:], NT[0, n_lam:], NT[1, n_lam:], NT[2, n_lam:],
-                            SP, SW, q_run * q_run, normals[b, 0], normals[b, 1], normals[b, 2], vals[n_lam:])
-        pos_lam, pos_two = 0, n_lam
+            r = rule[t - t0] + 1
+            pos[r] = _copy_points(TP, TN, TW, slot[rec[t], order[t]], order[t] * order[t], PT, NT, W, pos[r])
+        for r, lambert_mode in ((0, 1), (1, mode)):  # raw sum, then the mode's form
+            if lanes[r] > 0:
+                g = np.empty(_G_SIZE)
+                w, h, wc = np.empty((k, 3)), np.empty(k), np.empty((2 * k, 3))
+                for lo in range(first[r], first[r] + lanes[r], _SRC_LANES):
+                    _source_block(PT, NT, lo, min(_SRC_LANES, first[r] + lanes[r] - lo), quads, b, lambert_mode,
+                                  vals, g, w, h, wc)
+        for q in range(1, max_q + 1):
+            if lanes[q + 1] > 0:
+                lo, hi = first[q + 1], first[q + 1] + lanes[q + 1]
+                SP, SN, SW = np.empty((3, q * q)), np.empty((3, q * q)), np.empty(q * q)
+                _put_points(quads, normals, centroid, area, b, q, nodes, weights, SP, SN, SW, 0)
+                _two_area_lanes(PT[0, lo:hi], PT[1, lo:hi], PT[2, lo:hi], NT[0, lo:hi], NT[1, lo:hi], NT[2, lo:hi],
+                                SP, SW, q * q, normals[b, 0], normals[b, 1], normals[b, 2], vals[lo:hi])
+        pos = first.copy()
         for t in range(t0, t1):
-            pos = pos_two if qs[t - t0] > 0 else pos_lam
+            r = rule[t - t0] + 1
             acc, wsum = 0.0, 0.0
-            for l in range(pos, pos + order[t] * order[t]):
+            for l in range(pos[r], pos[r] + order[t] * order[t]):
                 acc += W[l] * vals[l]
                 wsum += W[l]
-            if qs[t - t0] > 0:
-                pos_two += order[t] * order[t]
-            else:
-                pos_lam += order[t] * order[t]
+            pos[r] += order[t] * order[t]
             out[t] = acc / wsum if wsum > 0.0 else 0.0
 
 

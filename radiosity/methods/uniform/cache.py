@@ -44,7 +44,9 @@ FORMAT_VERSION = 1
 # of different objects merge, squares keep their own occluders (session 21). 8: shadow cells out
 # of points try the source's side, looser fills test one level for penumbrae (session 25), and
 # the squares cut needle triangles from their tips (formfactors.tip_collapsed, session 26).
-FILL_VERSION = 8
+# 9: each separated pair takes its own two-area order and raw-sum choice, not its run's
+# (F no longer depends on the fill's block sizes; session 27).
+FILL_VERSION = 9
 ENV_SIZE = "RADIOSITY_CACHE_SIZE"
 DEFAULT_LIMIT = 2 << 30  # 2 GiB: a few hundred Cornell-box-sized matrices, a handful of big ones
 
