@@ -2,6 +2,7 @@
 
     python bench/bench_growth.py [--quick] [--timeout 15] [--budget 75] [--plot docs/growth.png]
     python bench/bench_growth.py --plot-only            # redraw the plot and the table from the JSON
+    python bench/bench_growth.py --moonshot             # issue 14's 1M input faces (about 25 min)
 
 Three series, each case in its own process (``ru_maxrss`` is that case's peak; times compare
 within one run only, the machine is shared):
@@ -27,6 +28,13 @@ over 85% of the memory available, is skipped and recorded so. A warm-up (tiny ca
 recorded) first compiles any numba kernel missing from the cache. The growth exponents are the
 least-squares slopes of log time and log peak RSS against log N over each series' finished
 cases. Writes ``bench/results/growth.json`` and the plot ``docs/growth.png``.
+
+``--moonshot`` (issue 14: 1M input faces in 30 minutes) runs two cases instead, each in its own
+process with a 30-minute timeout, hierarchical ``draft`` (``method="auto"`` picks it): the
+furnace sphere at m = 224 (1,003,520 faces; error as the faces series) and the height-field
+terrain of ``bench_load.generate_terrain`` at side 709 (1,002,529 triangles under a small lamp,
+written as an OBJ and read by ``load_scene``, whose time is counted; no closed form: the ground's
+mean radiosity and the energy balance are recorded). Writes ``bench/results/moonshot.json``.
 """
 
 from __future__ import annotations
@@ -74,11 +82,24 @@ def run_case(spec: dict) -> dict:
     import radiosity
 
     load_before = os.getloadavg()[0]
-    if spec["series"] == "faces":
+    load_seconds = 0.0
+    if spec["series"] in ("faces", "moonshot_sphere"):
         from helpers import sphere_scene
 
         scene = sphere_scene(spec["m"])
         options = {"method": "hierarchical", "link_tolerance": 1e-2}
+    elif spec["series"] == "moonshot_terrain":
+        import tempfile
+
+        from bench_load import generate_terrain
+
+        with tempfile.TemporaryDirectory() as folder:
+            path = Path(folder) / "terrain.obj"
+            generate_terrain(path, spec["side"])
+            t0 = time.perf_counter()
+            scene = radiosity.load_scene(path)
+            load_seconds = time.perf_counter() - t0
+        options = {}  # method auto
     else:
         scene = radiosity.load_scene(radiosity.bundled_scene("cornell_box"))
         options = ({"method": "uniform", "max_patch_size": spec["max_patch_size"]} if spec["series"] == "uniform"
@@ -91,10 +112,15 @@ def run_case(spec: dict) -> dict:
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     summary = solution.summary()
     h = summary["hierarchy"] or {}
-    row = {**spec, "seconds": seconds, "peak_rss_MB": peak, "rss_before_solve_MB": baseline, "faces": int(scene.n_patches),
+    row = {**spec, "seconds": seconds + load_seconds, "load_seconds": load_seconds, "peak_rss_MB": peak,
+           "rss_before_solve_MB": baseline, "faces": int(scene.n_patches),
            "patches": int(solution.scene.n_patches), "nonzeros": int(solution.F.nnz),
            "links": int(h["links"]) if h else int(solution.F.nnz)}
-    if spec["series"] == "faces":
+    if spec["series"] == "moonshot_terrain":
+        # no closed form here: the ground's mean, and the energy balance (a check of the solve)
+        row.update(N=int(scene.n_patches), method=summary["method"], energy_W=summary["energy_W"],
+                   ground_mean=float(np.asarray(solution.object_radiosity()["ground"]).mean()))
+    elif spec["series"] in ("faces", "moonshot_sphere"):
         error = np.abs(solution.radiosity / 2.0 - 1.0)
         row.update(N=int(scene.n_patches), max_error=float(error.max()), mean_error=float(error.mean()),
                    mean_signed_error=float((solution.radiosity / 2.0 - 1.0).mean()))
@@ -290,6 +316,26 @@ def plot(rows: list[dict], exponents: dict, path: Path, *, timeout: float) -> No
     print(f"wrote {path}")
 
 
+MOONSHOT = [{"series": "moonshot_sphere", "m": 224}, {"series": "moonshot_terrain", "side": 709}]
+MOONSHOT_TIMEOUT_S = 30 * 60.0
+
+
+def moonshot(out: str | None) -> None:
+    """Issue 14's moonshot: about a million input faces each, one process a case."""
+    uptime_before = _shell("uptime")
+    print(uptime_before)
+    run_cases(Path(__file__), [{"series": "faces", "m": 7}], cwd=HERE)  # compile what the cache lacks
+    rows = run_cases(Path(__file__), MOONSHOT, cwd=HERE, timeout=MOONSHOT_TIMEOUT_S)
+    print_table([{"case": r["series"], "faces": r.get("faces", ""), "links": r.get("links", ""),
+                  "seconds": r.get("seconds", ""), "load_seconds": r.get("load_seconds", ""),
+                  "peak_rss_MB": r.get("peak_rss_MB", ""), "max_error": r.get("max_error", ""),
+                  "ground_mean": r.get("ground_mean", ""), "note": _note(r) if "failed" in r else ""} for r in rows],
+                title="moonshot (error: the sphere's worst |B/2 - 1| per leaf)")
+    path = write_json("moonshot", {"uptime_before": uptime_before, "uptime_after": _shell("uptime"),
+                                   "timeout_s": MOONSHOT_TIMEOUT_S, "cases": rows}, out)
+    print(f"wrote {path}")
+
+
 def main() -> None:
     if len(sys.argv) > 2 and sys.argv[1] == "--case":
         print(json.dumps(run_case(json.loads(sys.argv[2]))))
@@ -300,6 +346,7 @@ def main() -> None:
         p.add_argument("--budget", type=float, default=75.0, help="minutes for the whole run (default 75)")
         p.add_argument("--plot", default=None, help="PNG path (default docs/growth.png; none with --quick)")
         p.add_argument("--plot-only", action="store_true", help="redraw from the JSON (--out or growth.json)")
+        p.add_argument("--moonshot", action="store_true", help="issue 14's 1M input faces: sphere and terrain")
         p.add_argument("--code", default=None,
                        help="where the imported radiosity came from when not this checkout (e.g. a git archive "
                             "of a commit on PYTHONPATH, while someone edits the checkout): recorded in the JSON")
@@ -314,6 +361,8 @@ def main() -> None:
         if plot_path:
             plot(data["cases"], exponents, plot_path, timeout=data.get("timeout_s", timeout))
         return
+    if args.moonshot:
+        return moonshot(args.out)
     uptime_before = _shell("uptime")
     print(uptime_before)
     print(_shell("free", "-g"))
