@@ -112,9 +112,12 @@ class Exchange:
         return float((self.scene.patch_area * self.ambient_factor * (eb - self.radiosity)).sum())
 
     def _per_object(self, values: np.ndarray, weights: np.ndarray | None) -> dict[str, float]:
+        from .solution import patch_groups
+
+        groups = patch_groups(self.scene.patch_object)
         out = {}
         for index, name in enumerate(self.scene.objects):
-            mask = self.scene.patch_object == index
+            mask = groups.get(index, np.zeros(0, np.int64))
             if weights is None:
                 out[name] = float(values[mask].sum())
             else:

@@ -70,7 +70,7 @@ class Solution:
     def object_radiosity(self) -> dict[str, np.ndarray]:
         """Area-weighted mean radiosity (3,) of each named object, W/m^2."""
         area = self.scene.patch_area
-        members = _members(self.scene.patch_object)
+        members = patch_groups(self.scene.patch_object)
         out = {}
         for index, name in enumerate(self.scene.objects):
             mask = members.get(index, np.zeros(0, np.int64))
@@ -203,7 +203,7 @@ def _insert_t_junctions(vertices: np.ndarray, faces: list[np.ndarray], patch_fac
     """Patch outlines with the vertices of the same OBJ face that lie inside their edges
     inserted in order along each edge (distance below ``tol``)."""
     out = list(faces)
-    for members in _members(patch_face).values():
+    for members in patch_groups(patch_face).values():
         if len(members) < 2:  # a patch alone in its face: no other patch's vertex to insert
             continue
         candidates = np.unique(np.concatenate([faces[i] for i in members]))
@@ -226,10 +226,10 @@ def _insert_t_junctions(vertices: np.ndarray, faces: list[np.ndarray], patch_fac
     return out
 
 
-def _members(labels: np.ndarray) -> dict[int, np.ndarray]:
-    """{label: the ascending indices holding it}, from one sort: a mask per label costs
-    O(n) each, and with a label per OBJ face a terrain of a million triangles spent about five
-    minutes writing its outputs on those masks."""
+def patch_groups(labels: np.ndarray) -> dict[int, np.ndarray]:
+    """{label: the ascending indices holding it} (patches by object or by OBJ face), from one
+    sort: a mask per label costs O(n) each, and with a label per OBJ face a terrain of a million
+    triangles spent about five minutes writing its outputs on those masks."""
     labels = np.asarray(labels)
     order = np.argsort(labels, kind="stable")
     cuts = np.flatnonzero(np.diff(labels[order])) + 1

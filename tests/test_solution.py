@@ -83,14 +83,14 @@ def test_vertex_values_lie_within_patch_values():
 def test_patches_grouped_by_label_from_one_sort():
     """The per-face and per-object groups of the vertex mesh and the object means: the indices
     of each label in ascending order, as a mask per label gave them, for labels with gaps."""
-    from radiosity.solution import _members
+    from radiosity.solution import patch_groups
 
     labels = np.random.default_rng(3).choice([0, 2, 3, 7, 40], size=1000)
-    groups = _members(labels)
+    groups = patch_groups(labels)
     assert sorted(groups) == [0, 2, 3, 7, 40]
     for label, members in groups.items():
         np.testing.assert_array_equal(members, np.flatnonzero(labels == label))
-    assert _members(np.zeros(0, np.int64)) == {}
+    assert patch_groups(np.zeros(0, np.int64)) == {}
 
 
 def test_vertex_mesh_has_no_t_junctions_and_ignores_hidden_patches():

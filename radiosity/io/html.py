@@ -74,13 +74,15 @@ def _polygons(mesh) -> list[np.ndarray]:
 
 def _page(vertices, tris, patch, vertex_b, radiosity, patch_object, patch_area, names, camera, exposure,
           source) -> dict:
+    from ..solution import patch_groups
     from ..viz import tone_map
 
     corners = tris.ravel()
     srgb = tone_map(vertex_b / np.pi, exposure)
+    groups = patch_groups(patch_object)
     objects = []
     for index, name in enumerate(names):
-        mask = patch_object == index
+        mask = groups.get(index, np.zeros(0, np.int64))
         total = patch_area[mask].sum()
         mean = (patch_area[mask, None] * radiosity[mask]).sum(axis=0) / total if total > 0 else np.zeros(3)
         objects.append({"name": str(name), "radiosity": [float(v) for v in mean]})
