@@ -69,14 +69,8 @@ class Solution:
 
     def object_radiosity(self) -> dict[str, np.ndarray]:
         """Area-weighted mean radiosity (3,) of each named object, W/m^2."""
-        area = self.scene.patch_area
-        members = patch_groups(self.scene.patch_object)
-        out = {}
-        for index, name in enumerate(self.scene.objects):
-            mask = members.get(index, np.zeros(0, np.int64))
-            total = area[mask].sum()
-            out[name] = (area[mask, None] * self.radiosity[mask]).sum(axis=0) / total if total > 0 else np.zeros(3)
-        return out
+        means = object_means(self.scene.patch_object, self.scene.patch_area, self.radiosity, len(self.scene.objects))
+        return dict(zip(self.scene.objects, means))
 
     @cached_property
     def vertex_mesh(self) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
@@ -235,3 +229,15 @@ def patch_groups(labels: np.ndarray) -> dict[int, np.ndarray]:
     cuts = np.flatnonzero(np.diff(labels[order])) + 1
     groups = np.split(order, cuts)
     return {int(labels[g[0]]): g for g in groups if len(g)}
+
+
+def object_means(patch_object: np.ndarray, area: np.ndarray, values: np.ndarray, n_objects: int) -> list[np.ndarray]:
+    """Area-weighted mean of ``values`` (n, 3) over each object's patches, objects 0..n_objects-1
+    (zeros for an object without area)."""
+    groups = patch_groups(patch_object)
+    means = []
+    for index in range(n_objects):
+        mask = groups.get(index, np.zeros(0, np.int64))
+        total = area[mask].sum()
+        means.append((area[mask, None] * values[mask]).sum(axis=0) / total if total > 0 else np.zeros(3))
+    return means

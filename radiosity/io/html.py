@@ -74,18 +74,13 @@ def _polygons(mesh) -> list[np.ndarray]:
 
 def _page(vertices, tris, patch, vertex_b, radiosity, patch_object, patch_area, names, camera, exposure,
           source) -> dict:
-    from ..solution import patch_groups
+    from ..solution import object_means
     from ..viz import tone_map
 
     corners = tris.ravel()
     srgb = tone_map(vertex_b / np.pi, exposure)
-    groups = patch_groups(patch_object)
-    objects = []
-    for index, name in enumerate(names):
-        mask = groups.get(index, np.zeros(0, np.int64))
-        total = patch_area[mask].sum()
-        mean = (patch_area[mask, None] * radiosity[mask]).sum(axis=0) / total if total > 0 else np.zeros(3)
-        objects.append({"name": str(name), "radiosity": [float(v) for v in mean]})
+    means = object_means(patch_object, patch_area, radiosity, len(names))
+    objects = [{"name": str(name), "radiosity": [float(v) for v in mean]} for name, mean in zip(names, means)]
     return {
         "n": int(len(corners)),
         "position": _b64(vertices[corners], "<f4"),
