@@ -147,6 +147,9 @@ def _alternate(hier: Hierarchy, options: Options, timings: dict, bar):
     for round_ in range(MAX_ROUNDS):
         if bar is not None:
             bar.set_postfix_str(f"pass {round_ + 1}")
+        # the last pass's operator is not held through refinement (about 2.2 GB of a 300k-face
+        # sphere's 6.9 GB peak); a pass that splits nothing may still settle links: rebuilt below
+        K = None
         t = time.perf_counter()
         split = hier.refine()
         refine_s += time.perf_counter() - t
@@ -158,7 +161,7 @@ def _alternate(hier: Hierarchy, options: Options, timings: dict, bar):
         B, K, leaves, report = hier.solve(options.solver_rtol, clamp=True)
         clamped = K.row_scale is not None
         solve_s += time.perf_counter() - t
-    if clamped:
+    if clamped or K is None:
         t = time.perf_counter()
         B, K, leaves, report = hier.solve(options.solver_rtol)
         solve_s += time.perf_counter() - t

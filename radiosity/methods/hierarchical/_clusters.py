@@ -33,6 +33,9 @@ __all__ = ["ClusterTree", "CLUSTER_MIN_ROOTS"]
 CLUSTER_MIN_ROOTS = 400
 ESTIMATE_CHUNK = 2_000_000  # member faces summed at once by the isotropic estimates
 ESTIMATE_DEPTH = 2  # levels of children a cluster link's estimate sums over (see ClusterTree.estimates)
+# links estimated at once: each becomes up to 4**ESTIMATE_DEPTH node pairs, about 150 bytes each
+# in _halve's arrays; all 5.4 M links of a 300k-face sphere at once took 1.5 GB (session 27)
+ESTIMATE_LINKS = 250_000
 
 
 def _ranges(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -265,11 +268,14 @@ class ClusterTree:
         (curved clusters' centres lie inside it, closer than their faces); each level down
         roughly halves that bias for about the same cost again.
         """
-        link, a, b = np.arange(len(r)), r, s
-        for _ in range(ESTIMATE_DEPTH):
-            link, a, b = _halve(self, link, a, b, first=True)
-            link, a, b = _halve(self, link, a, b, first=False)
-        out = np.bincount(link, self.area[a] * self._estimates(a, b), minlength=len(r))
+        out = np.zeros(len(r))
+        for start in range(0, len(r), ESTIMATE_LINKS):
+            part = slice(start, start + ESTIMATE_LINKS)
+            link, a, b = np.arange(len(r[part])), r[part], s[part]
+            for _ in range(ESTIMATE_DEPTH):
+                link, a, b = _halve(self, link, a, b, first=True)
+                link, a, b = _halve(self, link, a, b, first=False)
+            out[part] = np.bincount(link, self.area[a] * self._estimates(a, b), minlength=len(r[part]))
         return np.minimum(out / np.maximum(self.area[r], 1e-300), 1.0)
 
     def _estimates(self, r: np.ndarray, s: np.ndarray) -> np.ndarray:
