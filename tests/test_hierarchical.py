@@ -455,6 +455,27 @@ def test_cluster_estimates_are_the_same_in_any_chunks_of_links(monkeypatch):
     assert (whole > 0).sum() > 50
 
 
+@pytest.mark.parametrize("scene_of", ["cubes", "sphere"])
+def test_projected_area_of_a_node_is_the_sum_over_its_patches(scene_of):
+    """P(u) = sum A_i max(0, n_i . u): from the area vector where the node's normal cone is on
+    one side of u's plane, patch by patch where it straddles; both agree with the plain sum."""
+    from helpers import sphere_scene
+    from radiosity.methods.hierarchical._clusters import ClusterTree
+
+    scene = cube_room_scene(20) if scene_of == "cubes" else sphere_scene(8)
+    tree = ClusterTree(np.arange(scene.n_patches), scene.patch_quads, scene.patch_normal, scene.patch_area,
+                       scene.reflectance)
+    rng = np.random.default_rng(5)
+    nodes = rng.integers(0, len(tree), 3000)
+    u = rng.normal(size=(3000, 3))
+    u[:1000] = tree.axis[nodes[:1000]] + 0.3 * u[:1000]  # many cones wholly in front of u
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    u[-1] = 0.0
+    expected = [sum(scene.patch_area[i] * max(0.0, scene.patch_normal[i] @ v)
+                    for i in tree.order[tree.lo[k]:tree.hi[k]]) for k, v in zip(nodes, u)]
+    np.testing.assert_allclose(tree._projected(nodes, u), expected, rtol=1e-12, atol=1e-15)
+
+
 def test_a_cluster_shares_a_link_by_how_its_patches_face_the_source():
     """A cube's faces as one cluster, lit from +x: the +x face takes the whole share (its area
     mean over the cube is 1, so the link keeps its power), the faces turned away none; the

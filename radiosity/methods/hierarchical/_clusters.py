@@ -152,6 +152,8 @@ class ClusterTree:
         self.radius[leaf] = np.linalg.norm(q - self.centre[leaf][:, None], axis=2).max(axis=1)
         self.area[leaf], self.rho[leaf] = self.areas[self.patch[leaf]], rho[self.patch[leaf]]
         self.axis[leaf] = self.normals[self.patch[leaf]]
+        self.area_vector = np.zeros((k, 3))  # sum of A_i n_i over the node's patches
+        self.area_vector[leaf] = self.area[leaf, None] * self.axis[leaf]
         for depth in range(int(self.level.max()), -1, -1):
             nodes = np.flatnonzero((self.level == depth) & (self.patch < 0))
             if not len(nodes):
@@ -167,6 +169,7 @@ class ClusterTree:
             self.radius[nodes] = np.maximum.reduceat(far, np.cumsum(self.hi[nodes] - self.lo[nodes])
                                                      - (self.hi[nodes] - self.lo[nodes]))
             self.area[nodes] = self.area[a] + self.area[b]
+            self.area_vector[nodes] = self.area_vector[a] + self.area_vector[b]
             self.rho[nodes] = np.maximum(self.rho[a], self.rho[b])
             mean = self.area[a, None] * self.axis[a] + self.area[b, None] * self.axis[b]
             norm = np.linalg.norm(mean, axis=1)
@@ -253,11 +256,24 @@ class ClusterTree:
         return cat(kept, 0), cat(kept, 1), cat(pairs, 0), cat(pairs, 1), n_split
 
     def _projected(self, nodes: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """(m,) sum over each node's patches of A_i max(0, n_i . u_m)."""
-        seg, pos = _ranges(self.lo[nodes], self.hi[nodes])
+        """(m,) sum over each node's patches of A_i max(0, n_i . u_m), ``u`` unit or zero.
+
+        Where the normal cone lies wholly on one side of the plane normal to u, no term is
+        clipped: the sum is the node's area vector dotted with u (or 0). Only nodes whose cone
+        straddles that plane are summed patch by patch; on a 50k-face sphere the patch sums
+        were 29% of the solve's time.
+        """
+        tilt = _angle(self.axis[nodes], u)
+        margin = 1e-6  # radians: far above the arccos rounding of the cones and of the tilt
+        front = tilt + self.cone[nodes] <= np.pi / 2 - margin
+        straddle = ~front & (tilt - self.cone[nodes] < np.pi / 2 + margin)
+        out = np.where(front, np.einsum("mc,mc->m", self.area_vector[nodes], u), 0.0)
+        mixed = np.flatnonzero(straddle)
+        seg, pos = _ranges(self.lo[nodes[mixed]], self.hi[nodes[mixed]])
         p = self.order[pos]
-        cos = np.einsum("tc,tc->t", self.normals[p], u[seg])
-        return np.bincount(seg, self.areas[p] * np.maximum(cos, 0.0), minlength=len(nodes))
+        cos = np.einsum("tc,tc->t", self.normals[p], u[mixed][seg])
+        out[mixed] = np.bincount(seg, self.areas[p] * np.maximum(cos, 0.0), minlength=len(mixed))
+        return out
 
     def estimates(self, r: np.ndarray, s: np.ndarray) -> np.ndarray:
         """(m,) isotropic factor of each cluster link: H_r = F_rs B_s per unit area of r.
