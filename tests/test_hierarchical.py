@@ -439,41 +439,121 @@ def test_the_memory_estimate_counts_cluster_links_and_refuses_what_will_not_fit(
         solve_h(furnace, link_tolerance=1e-2, min_element_rel=1 / 10)
 
 
-def test_cluster_estimates_are_the_same_in_any_chunks_of_links(monkeypatch):
-    """The estimates go through the links in chunks (all 5.4 M links of a 300k-face sphere at
-    once took 1.5 GB): each link's estimate is the same bits in a chunk of 7 links as in one."""
-    from radiosity.methods.hierarchical import _clusters
+def _tree_of(scene_of: str):
+    from helpers import sphere_scene
+    from radiosity.methods.hierarchical._clusters import ClusterTree
 
-    scene = cube_room_scene(20)
-    tree = _clusters.ClusterTree(np.arange(scene.n_patches), scene.patch_quads, scene.patch_normal,
-                                 scene.patch_area, scene.reflectance)
-    rng = np.random.default_rng(3)
-    r, s = rng.choice(tree.internal, 200), rng.integers(0, len(tree), 200)
-    whole = tree.estimates(r, s)
-    monkeypatch.setattr(_clusters, "ESTIMATE_LINKS", 7)
-    np.testing.assert_array_equal(tree.estimates(r, s), whole)
-    assert (whole > 0).sum() > 50
+    scene = cube_room_scene(20) if scene_of == "cubes" else sphere_scene(8)
+    return scene, ClusterTree(np.arange(scene.n_patches), scene.patch_quads, scene.patch_normal, scene.patch_area,
+                              scene.reflectance)
+
+
+def _projected_sum(scene, tree, k, u):
+    """sum over node k's patches of A_i max(0, n_i . u), patch by patch."""
+    members = tree.order[tree.lo[k]:tree.hi[k]]
+    return float(scene.patch_area[members] @ np.maximum(scene.patch_normal[members] @ u, 0.0))
 
 
 @pytest.mark.parametrize("scene_of", ["cubes", "sphere"])
 def test_projected_area_of_a_node_is_the_sum_over_its_patches(scene_of):
     """P(u) = sum A_i max(0, n_i . u): from the area vector where the node's normal cone is on
     one side of u's plane, patch by patch where it straddles; both agree with the plain sum."""
-    from helpers import sphere_scene
-    from radiosity.methods.hierarchical._clusters import ClusterTree
+    from radiosity.methods.hierarchical._clusters_kernel import _projected
 
-    scene = cube_room_scene(20) if scene_of == "cubes" else sphere_scene(8)
-    tree = ClusterTree(np.arange(scene.n_patches), scene.patch_quads, scene.patch_normal, scene.patch_area,
-                       scene.reflectance)
+    scene, tree = _tree_of(scene_of)
     rng = np.random.default_rng(5)
-    nodes = rng.integers(0, len(tree), 3000)
-    u = rng.normal(size=(3000, 3))
-    u[:1000] = tree.axis[nodes[:1000]] + 0.3 * u[:1000]  # many cones wholly in front of u
+    nodes = rng.integers(0, len(tree), 1000)
+    u = rng.normal(size=(1000, 3))
+    u[:300] = tree.axis[nodes[:300]] + 0.3 * u[:300]  # many cones wholly in front of u
     u /= np.linalg.norm(u, axis=1)[:, None]
     u[-1] = 0.0
-    expected = [sum(scene.patch_area[i] * max(0.0, scene.patch_normal[i] @ v)
-                    for i in tree.order[tree.lo[k]:tree.hi[k]]) for k, v in zip(nodes, u)]
-    np.testing.assert_allclose(tree._projected(nodes, u), expected, rtol=1e-12, atol=1e-15)
+    _, _, lo, hi, order, normals, areas, _, axis, cone = tree._kernel_tree()
+    got = [_projected(k, *v, lo, hi, order, normals, areas, axis, cone, tree.area_vector) for k, v in zip(nodes, u)]
+    np.testing.assert_allclose(got, [_projected_sum(scene, tree, k, v) for k, v in zip(nodes, u)],
+                               rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize("scene_of", ["cubes", "sphere"])
+def test_cluster_estimates_sum_over_the_node_pairs_two_levels_down(scene_of):
+    """F_rs = sum_ab A_a F_ab / A_r over the nodes a, b ESTIMATE_DEPTH levels below r and s
+    (a patch node its own child), F_ab = P_a(u) P_b(-u) / (pi d^2 A_a) from centre to centre."""
+    from radiosity.methods.hierarchical._clusters import ESTIMATE_DEPTH
+
+    scene, tree = _tree_of(scene_of)
+    rng = np.random.default_rng(3)
+    r, s = rng.choice(tree.internal, 200), rng.integers(0, len(tree), 200)
+    expected = []
+    for k, source in zip(r, s):
+        ends = [[k], [source]]
+        for _ in range(ESTIMATE_DEPTH):
+            ends = [[c for x in end for c in (tree.child[x] if tree.patch[x] < 0 else [x])] for end in ends]
+        total = 0.0
+        for a in ends[0]:
+            for b in ends[1]:
+                u = tree.centre[b] - tree.centre[a]
+                d2 = u @ u
+                if d2 > 0:
+                    u = u / np.sqrt(d2)
+                    power = _projected_sum(scene, tree, a, u) * _projected_sum(scene, tree, b, -u) / (np.pi * d2)
+                    total += tree.area[a] * min(power / tree.area[a], 1.0)
+        expected.append(min(total / tree.area[k], 1.0))
+    got = tree.estimates(r, s)
+    np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-300)
+    assert (got > 0).sum() > 50
+
+
+def _reference_bound(tree, r, s, B):
+    """ClusterTree.bound written out in numpy (the form the numba kernel replaced)."""
+    angle = lambda a, b: np.arccos(np.clip(np.einsum("mc,mc->m", a, b), -1, 1))  # noqa: E731
+    w = tree.centre[s] - tree.centre[r]
+    dist = np.linalg.norm(w, axis=1)
+    gap = dist - tree.radius[r] - tree.radius[s]
+    w = w / np.where(dist > 0, dist, 1.0)[:, None]
+    spread = np.arcsin(np.clip((tree.radius[r] + tree.radius[s]) / np.where(gap > 0, dist, 1.0), 0, 1))
+    cos_r = np.cos(np.clip(angle(tree.axis[r], w) - tree.cone[r] - spread, 0, np.pi / 2))
+    cos_s = np.cos(np.clip(angle(tree.axis[s], -w) - tree.cone[s] - spread, 0, np.pi / 2))
+    safe_gap = np.where(gap > 0, gap, 1.0)
+    factor = np.where(gap > 0, np.minimum(1, tree.area[s] * cos_r * cos_s / (np.pi * safe_gap ** 2)), 1)
+    wo = angle(tree.axis[r], tree.axis[s]) + tree.cone[r] + tree.cone[s]
+    return (tree.rho[r] * B[s]).max(axis=1) * np.minimum(factor, np.where(wo < np.pi / 2, np.sin(wo) ** 2, 1.0))
+
+
+@pytest.mark.parametrize("scene_of", ["cubes", "sphere"])
+def test_cluster_link_kernels_agree_with_their_definitions(scene_of):
+    """The numba kernels of the cluster links against their definitions written out: bounds
+    (numpy), the patch facing a point most, and each receiver patch's share (Python loops)."""
+    from radiosity.methods.hierarchical._clusters import ESTIMATE_DEPTH
+
+    scene, tree = _tree_of(scene_of)
+    rng = np.random.default_rng(11)
+    r, s = rng.choice(tree.internal, 400), rng.integers(0, len(tree), 400)
+    B = rng.random((len(tree), 3))
+    np.testing.assert_allclose(tree.bound(r, s, B), _reference_bound(tree, r, s, B), rtol=1e-9, atol=1e-300)
+    members = lambda k: tree.order[tree.lo[k]:tree.hi[k]]  # noqa: E731
+    toward = tree.centre[s]
+    picked = tree.facing_patch(r, toward)
+    for k, point, pick in zip(r, toward, picked):
+        score = [scene.patch_area[i] * scene.patch_normal[i] @ (point - tree.centre[k]) for i in members(k)]
+        assert pick == (members(k)[::-1][np.argmax(score[::-1])] if max(score) > 0 else members(k)[len(score) // 2])
+    link, patch, share = tree.oriented_shares(r[:60], s[:60])
+    for j, (k, source) in enumerate(zip(r[:60], s[:60])):
+        below = [source]
+        for _ in range(ESTIMATE_DEPTH):
+            below = [c for b in below for c in (tree.child[b] if tree.patch[b] < 0 else [b])]
+        weight = []
+        for i in members(k):
+            total = 0.0
+            for b in below:
+                u = tree.centre[b] - tree.centre[k]
+                power = _projected_sum(scene, tree, b, -u / max(np.linalg.norm(u), 1e-300))
+                w = tree.centre[b] - tree.centroids[i]  # the quad's vertex mean
+                if w @ w > 0:  # b is not patch i itself
+                    total += power * max(0.0, scene.patch_normal[i] @ w) / np.linalg.norm(w) ** 3
+            weight.append(total)
+        weight = np.array(weight)
+        mean = weight @ scene.patch_area[members(k)] / tree.area[k]
+        np.testing.assert_array_equal(patch[link == j], members(k))
+        np.testing.assert_allclose(share[link == j], weight / mean if mean > 0 else 1.0, rtol=1e-9)
 
 
 def test_a_cluster_shares_a_link_by_how_its_patches_face_the_source():

@@ -26,16 +26,14 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from ._clusters_kernel import facing_patches, link_bounds, link_estimates, receiver_shares
+
 __all__ = ["ClusterTree", "CLUSTER_MIN_ROOTS"]
 
 # Below this many active input patches the hierarchy starts from all facing pairs (n^2 is cheap
 # there and its links carry visibility from the start).
 CLUSTER_MIN_ROOTS = 400
-ESTIMATE_CHUNK = 2_000_000  # member faces summed at once by the isotropic estimates
 ESTIMATE_DEPTH = 2  # levels of children a cluster link's estimate sums over (see ClusterTree.estimates)
-# links estimated at once: each becomes up to 4**ESTIMATE_DEPTH node pairs, about 150 bytes each
-# in _halve's arrays; all 5.4 M links of a 300k-face sphere at once took 1.5 GB (session 27)
-ESTIMATE_LINKS = 250_000
 
 
 def _ranges(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -55,19 +53,6 @@ def chunks(sizes: np.ndarray, limit: int) -> list[np.ndarray]:
 def _angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """(m,) angle between unit vectors, radians."""
     return np.arccos(np.clip(np.einsum("mc,mc->m", a, b), -1.0, 1.0))
-
-
-def _halve(tree: "ClusterTree", link: np.ndarray, a: np.ndarray, b: np.ndarray, *, first: bool):
-    """Replace one end (``a`` if ``first``) of each node pair by its two children (patches stay)."""
-    node = a if first else b
-    split = tree.patch[node] < 0
-    kids = tree.child[node[split]]
-    keep = ~split
-    new_link = np.concatenate([link[keep], link[split], link[split]])
-    moved = np.concatenate([node[keep], kids[:, 0], kids[:, 1]])
-    other = (b if first else a)
-    fixed = np.concatenate([other[keep], other[split], other[split]])
-    return (new_link, moved, fixed) if first else (new_link, fixed, moved)
 
 
 class ClusterTree:
@@ -192,34 +177,23 @@ class ClusterTree:
 
     # ------------------------------------------------------------------ links
     def bound(self, r: np.ndarray, s: np.ndarray, B: np.ndarray) -> np.ndarray:
-        """(m,) error bound of node links (r gathers from s), radiosity units.
+        """(m,) error bound of node links (r gathers from s), radiosity units:
+        ``max_c(rho_r,c B_s,c)`` times the smaller of two bounds on the factor from any point of
+        r to s (numba: :func:`._clusters_kernel.link_bounds`).
 
-        ``A_s cos_r cos_s / (pi gap^2)`` with each cosine bounded over the node's normal cone
-        and the cone of directions between the two spheres (1 where the spheres overlap).
+        - ``A_s cos_r cos_s / (pi gap^2)`` with each cosine bounded over the node's normal cone
+          and the cone of directions between the two spheres (1 where the spheres overlap).
+        - From the normal cones alone, for spheres that overlap as well: ``sin^2 w``,
+          ``w = angle(axis_r, axis_s) + cone_r + cone_s`` (1 from pi/2 on). s sends light only
+          along directions u with n_s . u < 0 for some n_s in its cone, all within pi/2 + cone_s
+          of -axis_s, so at least pi/2 - w from any receiver normal n_r in r's cone; the
+          cosine-weighted share of that band of the hemisphere is sin^2 w. Without it two
+          touching patches of a terrain (or of one wall) always split down to their leaves.
         """
-        w = self.centre[s] - self.centre[r]
-        dist = np.linalg.norm(w, axis=1)
-        gap = dist - self.radius[r] - self.radius[s]
-        apart = gap > 0
-        w = w / np.where(dist > 0, dist, 1.0)[:, None]
-        spread = np.arcsin(np.clip((self.radius[r] + self.radius[s]) / np.where(apart, dist, 1.0), 0.0, 1.0))
-        cos_r = np.cos(np.minimum(np.pi / 2, np.maximum(0.0, _angle(self.axis[r], w) - self.cone[r] - spread)))
-        cos_s = np.cos(np.minimum(np.pi / 2, np.maximum(0.0, _angle(self.axis[s], -w) - self.cone[s] - spread)))
-        safe_gap = np.where(apart, gap, 1.0)
-        factor = np.where(apart, np.minimum(1.0, self.area[s] * cos_r * cos_s / (np.pi * safe_gap ** 2)), 1.0)
-        return (self.rho[r] * B[s]).max(axis=1) * np.minimum(factor, self.orientation_bound(r, s))
-
-    def orientation_bound(self, r: np.ndarray, s: np.ndarray) -> np.ndarray:
-        """(m,) bound on the factor from any point of r to s from the normal cones alone, for
-        spheres that overlap as well: ``sin^2 w``, ``w = angle(axis_r, axis_s) + cone_r + cone_s``.
-
-        s sends light only along directions u with n_s . u < 0 for some n_s in its cone, all
-        within pi/2 + cone_s of -axis_s, so at least pi/2 - w from any receiver normal n_r in
-        r's cone; the cosine-weighted share of that band of the hemisphere is sin^2 w. Without
-        it two touching patches of a terrain (or of one wall) always split down to their leaves.
-        """
-        w = _angle(self.axis[r], self.axis[s]) + self.cone[r] + self.cone[s]
-        return np.where(w < np.pi / 2, np.sin(np.minimum(w, np.pi / 2)) ** 2, 1.0)
+        out = np.empty(len(r))
+        link_bounds(np.asarray(r, np.int64), np.asarray(s, np.int64), self.centre, self.radius, self.axis,
+                    self.cone, self.area, self.rho, np.ascontiguousarray(B, dtype=float), out)
+        return out
 
     def refine(self, r: np.ndarray, s: np.ndarray, B: np.ndarray, eps: float):
         """Split node links over ``eps`` down to where they meet it or join two patches.
@@ -255,26 +229,6 @@ class ClusterTree:
         cat = lambda parts, i: np.concatenate([p[i] for p in parts]) if parts else np.zeros(0, np.int64)  # noqa: E731
         return cat(kept, 0), cat(kept, 1), cat(pairs, 0), cat(pairs, 1), n_split
 
-    def _projected(self, nodes: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """(m,) sum over each node's patches of A_i max(0, n_i . u_m), ``u`` unit or zero.
-
-        Where the normal cone lies wholly on one side of the plane normal to u, no term is
-        clipped: the sum is the node's area vector dotted with u (or 0). Only nodes whose cone
-        straddles that plane are summed patch by patch; on a 50k-face sphere the patch sums
-        were 29% of the solve's time.
-        """
-        tilt = _angle(self.axis[nodes], u)
-        margin = 1e-6  # radians: far above the arccos rounding of the cones and of the tilt
-        front = tilt + self.cone[nodes] <= np.pi / 2 - margin
-        straddle = ~front & (tilt - self.cone[nodes] < np.pi / 2 + margin)
-        out = np.where(front, np.einsum("mc,mc->m", self.area_vector[nodes], u), 0.0)
-        mixed = np.flatnonzero(straddle)
-        seg, pos = _ranges(self.lo[nodes[mixed]], self.hi[nodes[mixed]])
-        p = self.order[pos]
-        cos = np.einsum("tc,tc->t", self.normals[p], u[mixed][seg])
-        out[mixed] = np.bincount(seg, self.areas[p] * np.maximum(cos, 0.0), minlength=len(mixed))
-        return out
-
     def estimates(self, r: np.ndarray, s: np.ndarray) -> np.ndarray:
         """(m,) isotropic factor of each cluster link: H_r = F_rs B_s per unit area of r.
 
@@ -284,31 +238,15 @@ class ClusterTree:
         (curved clusters' centres lie inside it, closer than their faces); each level down
         roughly halves that bias for about the same cost again.
         """
-        out = np.zeros(len(r))
-        for start in range(0, len(r), ESTIMATE_LINKS):
-            part = slice(start, start + ESTIMATE_LINKS)
-            link, a, b = np.arange(len(r[part])), r[part], s[part]
-            for _ in range(ESTIMATE_DEPTH):
-                link, a, b = _halve(self, link, a, b, first=True)
-                link, a, b = _halve(self, link, a, b, first=False)
-            out[part] = np.bincount(link, self.area[a] * self._estimates(a, b), minlength=len(r[part]))
-        return np.minimum(out / np.maximum(self.area[r], 1e-300), 1.0)
-
-    def _estimates(self, r: np.ndarray, s: np.ndarray) -> np.ndarray:
-        """(m,) one centre-to-centre isotropic estimate per node pair."""
-        out = np.zeros(len(r))
-        sizes = (self.hi[r] - self.lo[r]) + (self.hi[s] - self.lo[s])
-        for part in chunks(sizes, ESTIMATE_CHUNK):
-            if not len(part):
-                continue
-            rr, ss = r[part], s[part]
-            u = self.centre[ss] - self.centre[rr]
-            d2 = np.einsum("mc,mc->m", u, u)
-            ok = d2 > 0
-            u = u / np.sqrt(np.where(ok, d2, 1.0))[:, None]
-            power = self._projected(rr, u) * self._projected(ss, -u) / (np.pi * np.where(ok, d2, 1.0))
-            out[part] = np.where(ok, np.minimum(power / np.maximum(self.area[rr], 1e-300), 1.0), 0.0)
+        out = np.empty(len(r))
+        link_estimates(np.asarray(r, np.int64), np.asarray(s, np.int64), ESTIMATE_DEPTH, *self._kernel_tree(),
+                       self.area, self.area_vector, out)
         return out
+
+    def _kernel_tree(self) -> tuple:
+        """The arrays the numba kernels walk the tree and project nodes with."""
+        return (self.child, self.patch, self.lo, self.hi, self.order, self.normals, self.areas, self.centre,
+                self.axis, self.cone)
 
     def facing_patch(self, nodes: np.ndarray, toward: np.ndarray) -> np.ndarray:
         """(m,) the patch of each node that faces the point ``toward`` (m, 3) most: the largest
@@ -320,16 +258,8 @@ class ClusterTree:
         and the 100-cube furnace room's brightest leaf was 4.9% over.
         """
         pick = self.order[(self.lo[nodes] + self.hi[nodes]) // 2]
-        sizes = self.hi[nodes] - self.lo[nodes]
-        for part in chunks(sizes, ESTIMATE_CHUNK):  # ~100 bytes a member
-            seg, pos = _ranges(self.lo[nodes[part]], self.hi[nodes[part]])
-            p = self.order[pos]
-            score = self.areas[p] * np.einsum("tc,tc->t", self.normals[p],
-                                              toward[part][seg] - self.centre[nodes[part]][seg])
-            best = np.full(len(part), -np.inf)
-            np.maximum.at(best, seg, score)
-            hit = np.flatnonzero((score >= best[seg]) & (best[seg] > 0))
-            pick[part[seg[hit]]] = p[hit]
+        facing_patches(self.lo[nodes], self.hi[nodes], self.order, self.normals, self.areas, self.centre[nodes],
+                       np.ascontiguousarray(toward, dtype=float), pick)
         return pick
 
     def oriented_shares(self, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -343,27 +273,14 @@ class ClusterTree:
 
         Returns (link, patch, share): one row per link and patch of its r.
         """
-        link, b = np.arange(len(r)), np.asarray(s)
-        for _ in range(ESTIMATE_DEPTH):
-            link, _, b = _halve(self, link, r[link], b, first=False)
-        u = self.centre[b] - self.centre[r[link]]
-        d = np.linalg.norm(u, axis=1)
-        power = self._projected(b, -u / np.where(d > 0, d, 1.0)[:, None])
         members = self.hi[r] - self.lo[r]
         start = np.cumsum(members) - members
-        seg, pos = _ranges(self.lo[r[link]], self.hi[r[link]])  # (node b, patch of r) rows
-        p = self.order[pos]
-        w = self.centre[b[seg]] - self.centroids[p]
-        d2 = np.einsum("tc,tc->t", w, w)
-        ok = d2 > 0
-        cos = np.maximum(np.einsum("tc,tc->t", self.normals[p], w), 0.0) / np.sqrt(np.where(ok, d2, 1.0))
-        weight = np.bincount(start[link[seg]] + pos - self.lo[r[link[seg]]],
-                             np.where(ok, power[seg] * cos / np.where(ok, d2, 1.0), 0.0), minlength=int(members.sum()))
+        share = np.empty(int(members.sum()))
+        child, patch, lo, hi, order, normals, areas, centre, axis, cone = self._kernel_tree()
+        receiver_shares(np.asarray(r, np.int64), np.asarray(s, np.int64), ESTIMATE_DEPTH, child, patch, lo, hi, order,
+                        self.centroids, normals, areas, self.area, centre, axis, cone, self.area_vector, start, share)
         row_link = np.repeat(np.arange(len(r)), members)
-        patch = self.order[_ranges(self.lo[r], self.hi[r])[1]]
-        mean = np.bincount(row_link, weight * self.areas[patch], minlength=len(r)) / np.maximum(self.area[r], 1e-300)
-        share = np.where(mean[row_link] > 0, weight / np.where(mean > 0, mean, 1.0)[row_link], 1.0)
-        return row_link, patch, share
+        return row_link, self.order[_ranges(self.lo[r], self.hi[r])[1]], share
 
     # ------------------------------------------------------------------ push-pull
     def membership(self, n_roots: int) -> sp.csr_matrix:

@@ -658,8 +658,8 @@ class Hierarchy:
                            ne + len(tree.internal))
         gather.add(self.links.r, self.links.s, self.links.factor * self.links.visible)
         gather.add(column[self.cluster_r[even]], column[self.cluster_s[even]], self.cluster_factor[even])
-        # in chunks of about SHARE_ROWS (link, patch) rows: the shares' temporaries take a few
-        # hundred bytes a row (one per source node below s)
+        # in chunks of about SHARE_ROWS (link, patch) rows: each takes about 40 bytes of
+        # temporaries (its share, link, patch and their products) besides its entry
         for part in chunks(members, SHARE_ROWS):
             link, patch, share = tree.oriented_shares(r[part], s[part])
             # roots are elements 0..n_roots-1: a patch's row is its element's

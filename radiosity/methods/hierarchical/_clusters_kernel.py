@@ -1,0 +1,172 @@
+"""numba kernels of the cluster links: their error bounds, their representative patches and how
+their receivers share them out (see :mod:`._clusters` for what each computes and why).
+
+Each works one link (or node) at a time over its node's patches, in tree order, without the
+(link, patch) temporaries of the numpy forms they replace: on a 50,000-face furnace sphere those
+took 62% of the solve's time (``bound`` 19.5%, ``facing_patch`` 16%, ``oriented_shares`` 26%).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+_HALF_PI = math.pi / 2
+
+
+@njit(cache=True, inline="always")
+def _angle(a0, a1, a2, b0, b1, b2):
+    """Angle between two unit vectors, radians."""
+    return math.acos(min(1.0, max(-1.0, a0 * b0 + a1 * b1 + a2 * b2)))
+
+
+@njit(cache=True, parallel=True)
+def link_bounds(r, s, centre, radius, axis, cone, area, rho, B, out):
+    """out[k] = bound of the link r[k] gathers from s[k]: ``max_c(rho_r,c B_s,c)`` times the
+    smaller of ``A_s cos_r cos_s / (pi gap^2)`` (1 where the spheres overlap) and the
+    orientation bound ``sin^2 w`` (see ClusterTree.bound and ClusterTree.orientation_bound)."""
+    for k in prange(len(r)):
+        i, j = r[k], s[k]
+        w0, w1, w2 = centre[j, 0] - centre[i, 0], centre[j, 1] - centre[i, 1], centre[j, 2] - centre[i, 2]
+        dist = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        gap = dist - radius[i] - radius[j]
+        apart = gap > 0.0
+        if dist > 0.0:
+            w0, w1, w2 = w0 / dist, w1 / dist, w2 / dist
+        factor = 1.0
+        if apart:
+            spread = math.asin(min(1.0, max(0.0, (radius[i] + radius[j]) / dist)))
+            tilt_r = _angle(axis[i, 0], axis[i, 1], axis[i, 2], w0, w1, w2)
+            tilt_s = _angle(axis[j, 0], axis[j, 1], axis[j, 2], -w0, -w1, -w2)
+            cos_r = math.cos(min(_HALF_PI, max(0.0, tilt_r - cone[i] - spread)))
+            cos_s = math.cos(min(_HALF_PI, max(0.0, tilt_s - cone[j] - spread)))
+            factor = min(1.0, area[j] * cos_r * cos_s / (math.pi * gap * gap))
+        w = _angle(axis[i, 0], axis[i, 1], axis[i, 2], axis[j, 0], axis[j, 1], axis[j, 2]) + cone[i] + cone[j]
+        if w < _HALF_PI:
+            factor = min(factor, math.sin(w) ** 2)
+        power = 0.0
+        for c in range(rho.shape[1]):
+            power = max(power, rho[i, c] * B[j, c])
+        out[k] = power * factor
+
+
+@njit(cache=True, parallel=True)
+def facing_patches(lo, hi, order, normals, areas, centre, toward, pick):
+    """pick[k] = the patch p of order[lo[k]:hi[k]] with the largest ``A_p n_p . (toward[k] -
+    centre[k])`` (the last of equals), where that is positive; pick[k] is left as it is if none is."""
+    for k in prange(len(lo)):
+        u0, u1, u2 = toward[k, 0] - centre[k, 0], toward[k, 1] - centre[k, 1], toward[k, 2] - centre[k, 2]
+        best, arg = -np.inf, -1
+        for t in range(lo[k], hi[k]):
+            p = order[t]
+            score = areas[p] * (normals[p, 0] * u0 + normals[p, 1] * u1 + normals[p, 2] * u2)
+            if score >= best:
+                best, arg = score, p
+        if best > 0.0:
+            pick[k] = arg
+
+
+# A cone this far (radians) from straddling u's plane is on one side of it: far above the
+# arccos rounding of the cones and of the tilt.
+PROJECTED_MARGIN = 1e-6
+
+
+@njit(cache=True, inline="always")
+def _projected(k, u0, u1, u2, lo, hi, order, normals, areas, axis, cone, area_vector):
+    """Sum over node k's patches of ``A_i max(0, n_i . u)`` (see ClusterTree._projected)."""
+    tilt = _angle(axis[k, 0], axis[k, 1], axis[k, 2], u0, u1, u2)
+    if tilt + cone[k] <= _HALF_PI - PROJECTED_MARGIN:
+        return area_vector[k, 0] * u0 + area_vector[k, 1] * u1 + area_vector[k, 2] * u2
+    if tilt - cone[k] >= _HALF_PI + PROJECTED_MARGIN:
+        return 0.0
+    total = 0.0
+    for t in range(lo[k], hi[k]):
+        p = order[t]
+        c = normals[p, 0] * u0 + normals[p, 1] * u1 + normals[p, 2] * u2
+        if c > 0.0:
+            total += areas[p] * c
+    return total
+
+
+@njit(cache=True, inline="always")
+def _below(node, depth, child, patch, out):
+    """The nodes ``depth`` levels below ``node`` into out (a patch node is its own child);
+    returns how many."""
+    out[0] = node
+    n = 1
+    for _ in range(depth):
+        m = n
+        for t in range(n - 1, -1, -1):  # in place, back to front: out[2t], out[2t + 1] <- out[t]
+            x = out[t]
+            if patch[x] < 0:
+                out[m], m = child[x, 1], m + 1
+                out[t] = child[x, 0]
+        n = m
+    return n
+
+
+@njit(cache=True, parallel=True)
+def link_estimates(r, s, depth, child, patch, lo, hi, order, normals, areas, centre, axis, cone, area,
+                   area_vector, out):
+    """out[k] = isotropic factor of the link r[k] gathers from s[k], summed over the pairs of
+    nodes ``depth`` levels below each end (see ClusterTree.estimates)."""
+    for k in prange(len(r)):
+        ends_r, ends_s = np.empty(2 ** depth, np.int64), np.empty(2 ** depth, np.int64)
+        n_r = _below(r[k], depth, child, patch, ends_r)
+        n_s = _below(s[k], depth, child, patch, ends_s)
+        total = 0.0
+        for i in range(n_r):
+            a = ends_r[i]
+            for j in range(n_s):
+                b = ends_s[j]
+                u0, u1, u2 = centre[b, 0] - centre[a, 0], centre[b, 1] - centre[a, 1], centre[b, 2] - centre[a, 2]
+                d2 = u0 * u0 + u1 * u1 + u2 * u2
+                if d2 <= 0.0:
+                    continue
+                d = math.sqrt(d2)
+                u0, u1, u2 = u0 / d, u1 / d, u2 / d
+                power = (_projected(a, u0, u1, u2, lo, hi, order, normals, areas, axis, cone, area_vector)
+                         * _projected(b, -u0, -u1, -u2, lo, hi, order, normals, areas, axis, cone, area_vector)
+                         / (math.pi * d2))
+                total += area[a] * min(power / max(area[a], 1e-300), 1.0)
+        out[k] = min(total / max(area[r[k]], 1e-300), 1.0)
+
+
+@njit(cache=True, parallel=True)
+def receiver_shares(r, s, depth, child, patch, lo, hi, order, centroids, normals, areas, area, centre, axis,
+                    cone, area_vector, start, share):
+    """share[start[k] + t] for patch order[lo[r[k]] + t] of link k's receiver: its weight
+    ``sum_b P_b(-u) max(0, n . w) / |w|^3`` over the nodes b ``depth`` levels below s[k] (``u``
+    from r's centre to b's, ``w`` from the patch's centroid to b's centre), scaled so that the
+    area mean over r is 1; all ones where no patch faces a source (see ClusterTree.oriented_shares)."""
+    for k in prange(len(r)):
+        ends = np.empty(2 ** depth, np.int64)
+        power = np.zeros(2 ** depth)
+        n_s = _below(s[k], depth, child, patch, ends)
+        node = r[k]
+        for j in range(n_s):
+            b = ends[j]
+            u0, u1, u2 = centre[b, 0] - centre[node, 0], centre[b, 1] - centre[node, 1], centre[b, 2] - centre[node, 2]
+            d = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+            if d > 0.0:
+                power[j] = _projected(b, -u0 / d, -u1 / d, -u2 / d, lo, hi, order, normals, areas, axis, cone,
+                                      area_vector)
+        total = 0.0
+        for t in range(hi[node] - lo[node]):
+            p = order[lo[node] + t]
+            weight = 0.0
+            for j in range(n_s):
+                b = ends[j]
+                w0, w1, w2 = centre[b, 0] - centroids[p, 0], centre[b, 1] - centroids[p, 1], \
+                    centre[b, 2] - centroids[p, 2]
+                d2 = w0 * w0 + w1 * w1 + w2 * w2
+                if d2 > 0.0:
+                    cos = max(normals[p, 0] * w0 + normals[p, 1] * w1 + normals[p, 2] * w2, 0.0) / math.sqrt(d2)
+                    weight += power[j] * cos / d2
+            share[start[k] + t] = weight
+            total += weight * areas[p]
+        mean = total / max(area[node], 1e-300)
+        for t in range(hi[node] - lo[node]):
+            share[start[k] + t] = share[start[k] + t] / mean if mean > 0.0 else 1.0
