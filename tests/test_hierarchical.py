@@ -397,6 +397,34 @@ def test_push_pull_conserves_power_through_clusters(furnace):
     np.testing.assert_allclose(K.pull @ np.ones(len(leaves)), 1.0, rtol=1e-12)
 
 
+def test_oriented_cluster_links_gather_as_their_matrix_entries_would():
+    """G keeps its oriented cluster links link by link (a value per patch of the receiver, no
+    indices); G @ x and G.T @ y equal those of the sparse matrix with one entry per link and
+    patch (the form it replaced, whose build was the 1M-face sphere's peak)."""
+    import scipy.sparse as sp
+
+    from radiosity.methods.hierarchical._hierarchy import ORIENT_CONE
+
+    scene = cube_room_scene(30)
+    hier = build_hierarchy(scene, Options.from_preset("draft", link_tolerance=1e-2, min_element_rel=1 / 10),
+                           clusters=True)
+    hier.refine()
+    _, K, _, _ = hier.solve(1e-10)
+    tree, G = hier.tree, K.gather
+    oriented = (tree.patch[hier.cluster_r] < 0) & (tree.cone[hier.cluster_r] > ORIENT_CONE)
+    assert oriented.sum() > 20
+    r, s = hier.cluster_r[oriented], hier.cluster_s[oriented]
+    link, patch, share = tree.oriented_shares(r, s)
+    column = np.where(tree.patch >= 0, tree.patch, len(hier.el) + tree.column)
+    entries = sp.csr_matrix((hier.cluster_factor[oriented][link] * share, (patch, column[s][link])), shape=G.shape)
+    full = G.matrix + entries
+    rng = np.random.default_rng(2)
+    x, y = rng.random(G.shape[1]), rng.random(G.shape[0])
+    np.testing.assert_allclose(G @ x, full @ x, rtol=1e-12)
+    np.testing.assert_allclose(G.T @ y, full.T @ y, rtol=1e-12)
+    np.testing.assert_allclose(G @ np.c_[x, 2 * x], full @ np.c_[x, 2 * x], rtol=1e-12)
+
+
 def test_the_solves_that_steer_refinement_see_no_more_than_a_hemisphere(clustered):
     """After the first pass (only emitters' links refined, here one cube's) the other cluster
     links are coarse: leaf rows of K summed to up to 14 in a furnished room, and the solve that

@@ -20,7 +20,7 @@ import numpy as np
 from ...options import Options
 from ...scene import Scene
 from ...visibility import Visibility
-from ._hierarchy import Hierarchy, HierarchyStats, LinkOperator, SolveReport
+from ._hierarchy import Hierarchy, HierarchyStats, LinkOperator, SolveReport, matrix_bytes
 
 __all__ = ["solve_hierarchical", "build_hierarchy", "min_element_size", "Hierarchy", "HierarchyStats",
            "LinkOperator", "HierarchicalResult", "MAX_ROUNDS"]
@@ -189,6 +189,5 @@ def _record(hier: Hierarchy, K: LinkOperator, leaves: np.ndarray) -> None:
     stats.elements = len(hier.el)
     stats.leaves = len(leaves)
     stats.max_level = int(hier.el.level.max())
-    matrices = (K.push, K.gather, K.pull)
-    stats.memory_bytes = int(sum(m.data.nbytes + m.indices.nbytes + m.indptr.nbytes for m in matrices)
+    stats.memory_bytes = int(sum(matrix_bytes(m) for m in (K.push, K.gather, K.pull))
                              + hier.el.quads.nbytes * 3 + stats.links * 50)

@@ -44,12 +44,6 @@ def _ranges(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return seg, np.repeat(lo, sizes) + np.arange(int(sizes.sum())) - starts[seg]
 
 
-def chunks(sizes: np.ndarray, limit: int) -> list[np.ndarray]:
-    """Consecutive index groups of ``sizes`` (rows each item makes) of about ``limit`` rows."""
-    bounds = np.searchsorted(np.cumsum(sizes), np.arange(limit, int(np.sum(sizes)), limit))
-    return np.split(np.arange(len(sizes)), np.unique(bounds))
-
-
 def _angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """(m,) angle between unit vectors, radians."""
     return np.arccos(np.clip(np.einsum("mc,mc->m", a, b), -1.0, 1.0))
@@ -274,13 +268,19 @@ class ClusterTree:
         Returns (link, patch, share): one row per link and patch of its r.
         """
         members = self.hi[r] - self.lo[r]
-        start = np.cumsum(members) - members
+        share = self.receiver_shares(r, s, np.ones(len(r)))
+        return np.repeat(np.arange(len(r)), members), self.order[_ranges(self.lo[r], self.hi[r])[1]], share
+
+    def receiver_shares(self, r: np.ndarray, s: np.ndarray, scale: np.ndarray) -> np.ndarray:
+        """The shares of :meth:`oriented_shares` times ``scale`` (one per link), link after link,
+        each receiver's patches in tree order (``order[lo[r]:hi[r]]``)."""
+        members = self.hi[r] - self.lo[r]
         share = np.empty(int(members.sum()))
         child, patch, lo, hi, order, normals, areas, centre, axis, cone = self._kernel_tree()
         receiver_shares(np.asarray(r, np.int64), np.asarray(s, np.int64), ESTIMATE_DEPTH, child, patch, lo, hi, order,
-                        self.centroids, normals, areas, self.area, centre, axis, cone, self.area_vector, start, share)
-        row_link = np.repeat(np.arange(len(r)), members)
-        return row_link, self.order[_ranges(self.lo[r], self.hi[r])[1]], share
+                        self.centroids, normals, areas, self.area, centre, axis, cone, self.area_vector,
+                        np.asarray(scale, float), np.cumsum(members) - members, share)
+        return share
 
     # ------------------------------------------------------------------ push-pull
     def membership(self, n_roots: int) -> sp.csr_matrix:

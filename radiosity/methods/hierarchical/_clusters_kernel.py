@@ -136,11 +136,12 @@ def link_estimates(r, s, depth, child, patch, lo, hi, order, normals, areas, cen
 
 @njit(cache=True, parallel=True)
 def receiver_shares(r, s, depth, child, patch, lo, hi, order, centroids, normals, areas, area, centre, axis,
-                    cone, area_vector, start, share):
+                    cone, area_vector, scale, start, share):
     """share[start[k] + t] for patch order[lo[r[k]] + t] of link k's receiver: its weight
     ``sum_b P_b(-u) max(0, n . w) / |w|^3`` over the nodes b ``depth`` levels below s[k] (``u``
     from r's centre to b's, ``w`` from the patch's centroid to b's centre), scaled so that the
-    area mean over r is 1; all ones where no patch faces a source (see ClusterTree.oriented_shares)."""
+    area mean over r is 1 (all ones where no patch faces a source; see
+    ClusterTree.oriented_shares), times scale[k]."""
     for k in prange(len(r)):
         ends = np.empty(2 ** depth, np.int64)
         power = np.zeros(2 ** depth)
@@ -169,4 +170,30 @@ def receiver_shares(r, s, depth, child, patch, lo, hi, order, centroids, normals
             total += weight * areas[p]
         mean = total / max(area[node], 1e-300)
         for t in range(hi[node] - lo[node]):
-            share[start[k] + t] = share[start[k] + t] / mean if mean > 0.0 else 1.0
+            share[start[k] + t] = scale[k] * (share[start[k] + t] / mean if mean > 0.0 else 1.0)
+
+
+@njit(cache=True)
+def spread_links(r, column, lo, hi, order, start, value, x, y):
+    """y[order[lo[r[k]] + t]] += value[start[k] + t] * x[column[k]] for every link k and
+    patch t of its receiver (the oriented cluster links' part of G @ x; serial: links scatter
+    into the same patches)."""
+    for k in range(len(r)):
+        source = x[column[k]]
+        if source == 0.0:
+            continue
+        node, base = r[k], start[k]
+        for t in range(hi[node] - lo[node]):
+            y[order[lo[node] + t]] += value[base + t] * source
+
+
+@njit(cache=True, parallel=True)
+def collect_links(r, column, lo, hi, order, start, value, y, out):
+    """out[k] = sum_t value[start[k] + t] * y[order[lo[r[k]] + t]]: what link k's column
+    takes of G.T @ y (to be added up by column)."""
+    for k in prange(len(r)):
+        node, base = r[k], start[k]
+        total = 0.0
+        for t in range(hi[node] - lo[node]):
+            total += value[base + t] * y[order[lo[node] + t]]
+        out[k] = total

@@ -42,7 +42,8 @@ import scipy.sparse.linalg as spla
 
 from ... import _memory
 from ...visibility import Visibility
-from ._clusters import CLUSTER_MIN_ROOTS, ClusterTree, chunks
+from ._clusters import CLUSTER_MIN_ROOTS, ClusterTree
+from ._clusters_kernel import collect_links, spread_links
 from ._elements import Elements
 from ._links import RECEIVER_ORDER, ElementVisibility, adaptive_factors, link_factors
 
@@ -92,7 +93,6 @@ ORIENT_CONE = 0.2
 # sum, not each (Hierarchy._over). 0.5 cost the bundled box's default solve 33% more links for
 # nothing; at 0.25 it has the same links within 0.2%, and the 100-cube room the same accuracy.
 SMALL_SOURCE = 0.25
-SHARE_ROWS = 500_000  # (link, patch) rows of the oriented shares computed at once
 # Receiver points per direction of the exact shadows of partly visible links at the minimum size
 # (see Hierarchy._settle).
 SETTLE_ORDER = 3
@@ -208,6 +208,72 @@ class LinkOperator(spla.LinearOperator):
 
     def _rmatmat(self, y):
         return self.pull.T @ (self.gather.T @ (self.push.T @ self._scaled(y)))
+
+
+@dataclass
+class _Spread:
+    """Oriented cluster links as G holds them: link k takes ``x[column[k]]`` to the patches of
+    its receiving node r[k] (``tree.order[lo:hi]``), each by its ``value`` (the link's factor
+    times the patch's share, :meth:`ClusterTree.receiver_shares`), link after link. 8 bytes a
+    value, where a sparse matrix's entry took 12, and 28 while it was built (the 1M-face
+    sphere's peak)."""
+
+    r: np.ndarray
+    column: np.ndarray
+    value: np.ndarray
+    tree: ClusterTree
+
+    def __post_init__(self):
+        members = self.tree.hi[self.r] - self.tree.lo[self.r]
+        self.start = np.cumsum(members) - members
+
+    @property
+    def nbytes(self) -> int:
+        return self.value.nbytes + 3 * 8 * len(self.r)
+
+    def add_gathered(self, x: np.ndarray, y: np.ndarray) -> None:
+        """y += (these links of G) @ x, for one vector."""
+        t = self.tree
+        spread_links(self.r, self.column, t.lo, t.hi, t.order, self.start, self.value, x, y)
+
+    def add_collected(self, y: np.ndarray, x: np.ndarray) -> None:
+        """x += (these links of G).T @ y, for one vector."""
+        t = self.tree
+        taken = np.empty(len(self.r))
+        collect_links(self.r, self.column, t.lo, t.hi, t.order, self.start, self.value, y, taken)
+        x += np.bincount(self.column, taken, minlength=len(x))
+
+
+class ClusterGather(spla.LinearOperator):
+    """G of a clustered hierarchy: a sparse matrix (element links, cluster links spread evenly)
+    plus the oriented cluster links (:class:`_Spread`)."""
+
+    def __init__(self, matrix: sp.csr_matrix, spread: _Spread):
+        self.matrix, self.spread = matrix, spread
+        super().__init__(dtype=np.float64, shape=matrix.shape)
+
+    @property
+    def nbytes(self) -> int:
+        return matrix_bytes(self.matrix) + self.spread.nbytes
+
+    def _matvec(self, x):
+        x = np.ascontiguousarray(np.ravel(x), dtype=float)
+        y = self.matrix @ x
+        self.spread.add_gathered(x, y)
+        return y
+
+    def _rmatvec(self, y):
+        y = np.ascontiguousarray(np.ravel(y), dtype=float)
+        x = self.matrix.T @ y
+        self.spread.add_collected(y, x)
+        return x
+
+
+def matrix_bytes(m) -> int:
+    """Bytes held by a CSR matrix or a ClusterGather."""
+    if hasattr(m, "indptr"):
+        return m.data.nbytes + m.indices.nbytes + m.indptr.nbytes
+    return m.nbytes
 
 
 @dataclass
@@ -651,20 +717,13 @@ class Hierarchy:
         oriented = (tree.patch[self.cluster_r] < 0) & (tree.cone[self.cluster_r] > ORIENT_CONE)
         even = ~oriented
         r, s, factor = self.cluster_r[oriented], self.cluster_s[oriented], self.cluster_factor[oriented]
-        members = (tree.hi - tree.lo)[r]
-        # one entry per element link, per even cluster link, and per oriented link and patch of
-        # its receiver (1.2 M for the 300-cube room, tens of millions for a 300k-face sphere)
-        gather = _Triplets(len(self.links) + int(even.sum()) + int(members.sum()),
-                           ne + len(tree.internal))
+        gather = _Triplets(len(self.links) + int(even.sum()), ne + len(tree.internal))
         gather.add(self.links.r, self.links.s, self.links.factor * self.links.visible)
         gather.add(column[self.cluster_r[even]], column[self.cluster_s[even]], self.cluster_factor[even])
-        # in chunks of about SHARE_ROWS (link, patch) rows: each takes about 40 bytes of
-        # temporaries (its share, link, patch and their products) besides its entry
-        for part in chunks(members, SHARE_ROWS):
-            link, patch, share = tree.oriented_shares(r[part], s[part])
-            # roots are elements 0..n_roots-1: a patch's row is its element's
-            gather.add(patch, column[s[part]][link], factor[part][link] * share)
-        return push, gather.tocsr(), pull
+        # an oriented link has one value per patch of its receiver (tens of millions for a
+        # 300k-face sphere): kept link by link, without row and column indices
+        spread = _Spread(r, column[s], tree.receiver_shares(r, s, factor), tree)
+        return push, ClusterGather(gather.tocsr(), spread), pull
 
     def solve(self, rtol: float, clamp: bool = False) -> tuple[np.ndarray, LinkOperator, np.ndarray, SolveReport]:
         """Leaf radiosities (l, 3) of B = E + rho K B; element radiosities are pulled from them.
