@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 import radiosity
 from radiosity.methods.hierarchical import build_hierarchy
+from radiosity.methods.hierarchical._hierarchy import _solve_channel
 from radiosity.methods.hierarchical._elements import Elements, split_quads
 from radiosity.options import Options
 from radiosity.geometry import centroids_and_areas
@@ -380,6 +381,20 @@ def test_a_small_source_touching_a_long_receiver_bounds_its_spread():
     bound = _near_bound(el, r, s, near_only=True)
     assert bound[0] == TOUCHING_BOUND == 1.0
     assert bound[1] < 1.0  # not touching: the sphere bound as before
+
+
+def test_a_grey_channel_is_solved_once(furnace):
+    """Channels with the same reflectance and emission are one system: solved once, copied
+    (0 iterations), the same radiosities as when solved on their own."""
+    hier = build_hierarchy(furnace, Options.from_preset("draft", link_tolerance=1e-2, min_element_rel=1 / 10))
+    hier.refine()
+    start = hier.B.copy()
+    B, K, leaves, report = hier.solve(1e-10)
+    assert report.iterations[0] > 0 and report.iterations[1:] == [0, 0]
+    np.testing.assert_array_equal(B[:, 1], B[:, 0])
+    root = hier.el.root[leaves]
+    alone, *_ = _solve_channel(K, hier.rho[root][:, 2], hier.emission[root][:, 2], start[leaves][:, 2], 1e-10)
+    np.testing.assert_array_equal(B[:, 2], alone)
 
 
 def test_push_pull_conserves_power_through_clusters(furnace):

@@ -737,7 +737,13 @@ class Hierarchy:
         B = self.B[leaves].copy()
         report = SolveReport()
         for c in range(3):
-            B[:, c], iterations, residual, fallback = _solve_channel(K, rho[:, c], emission[:, c], B[:, c], rtol)
+            same = next((k for k in range(c) if np.array_equal(rho[:, k], rho[:, c])
+                         and np.array_equal(emission[:, k], emission[:, c])), None)
+            if same is not None:  # a grey channel: the same system as one solved already
+                B[:, c] = B[:, same]
+                iterations, residual, fallback = 0, report.residual[same], report.fallback[same]
+            else:
+                B[:, c], iterations, residual, fallback = _solve_channel(K, rho[:, c], emission[:, c], B[:, c], rtol)
             report.iterations.append(iterations)
             report.residual.append(residual)
             report.fallback.append(fallback)
