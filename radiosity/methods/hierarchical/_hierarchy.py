@@ -67,7 +67,7 @@ ELEMENT_BYTES = 96 + 24 + 24 + 6 * 8 + 24 + 8 * 24
 # so cluster links take 1,024. The stored size (LINK_BYTES) is 107 (94 before the point deviations).
 LINK_PEAK_BYTES = 200
 CLUSTER_LINK_PEAK_BYTES = 1024
-CHUNK_LINKS = 100_000  # links evaluated at once (bounds the temporaries of the estimates)
+CHUNK_LINKS = 100_000  # links evaluated at once (bounds the temporaries of their visibility)
 # Cluster links scale their isotropic estimate by the visibility of one representative pair of
 # patches (since 2026-12-05 the two facing each other most, ClusterTree.facing_patch; the middle
 # patches in tree order, until then, were often turned away from each other and so "free": the
@@ -566,8 +566,13 @@ class Hierarchy:
         if not (CLUSTER_VISIBILITY or CLUSTER_EPS_SHARE < 1.0) or not len(r):
             return np.ones(len(r)), np.zeros(len(r), bool)
         tree = self.tree
-        visible, partial = self.vis.fractions(self.el, tree.facing_patch(r, tree.centre[s]),
-                                              tree.facing_patch(s, tree.centre[r]))
+        a, b = tree.facing_patch(r, tree.centre[s]), tree.facing_patch(s, tree.centre[r])
+        visible, partial = np.empty(len(r)), np.empty(len(r), bool)
+        # in chunks, as element links are: the 5 M cluster links of the 1,000-cube room at once
+        # gave the closed-room cull a (link, occluder) row per candidate of each: its 4.8 GB peak
+        for start in range(0, len(r), CHUNK_LINKS):
+            part = slice(start, start + CHUNK_LINKS)
+            visible[part], partial[part] = self.vis.fractions(self.el, a[part], b[part])
         return np.clip(visible, 0.0, 1.0), partial
 
     def refine(self) -> int:
