@@ -49,10 +49,9 @@ from ._links import RECEIVER_ORDER, ElementVisibility, adaptive_factors, link_fa
 
 __all__ = ["Hierarchy", "LinkOperator", "Links", "HierarchyStats"]
 
-# Bytes per stored link (ends, factor, spread, visibility, flags, point deviations, G's CSR entry) and per element
-# (geometry, tree, radiosity, P and R entries of a few levels): the memory estimate's rates.
+# Bytes per stored link (ends, factor, spread, visibility, flags, point deviations, G's CSR entry): what
+# the peak rates below are measured against.
 LINK_BYTES = 8 + 8 + 8 + 8 + 8 + 2 + 9 + 4 + 12 + 40
-ELEMENT_BYTES = 96 + 24 + 24 + 6 * 8 + 24 + 8 * 24
 # What a link costs at the peak of a solve, with the refinement's batches (and, for cluster
 # links, the estimates' node pairs), per link the check counts (the kept links and the new
 # candidates): on the Cornell box at fine, 3.5 mm, link_tolerance 5e-4, 2.32 GB above the RSS
@@ -64,9 +63,17 @@ ELEMENT_BYTES = 96 + 24 + 24 + 6 * 8 + 24 + 8 * 24
 # oriented shares (2026-12-05) the same room peaked at 10.5 GB for 6.81 M links (2,048 a cluster
 # link then); the peak was the numpy test of every (link, occluder) row for occluders behind
 # either element's plane, which the classification kernel now makes: 4.4 GB, 647 bytes a link,
-# so cluster links take 1,024. The stored size (LINK_BYTES) is 107 (94 before the point deviations).
+# so cluster links took 1,024. The stored size (LINK_BYTES) is 107 (94 before the point deviations).
+# Session 28 took the cluster links' estimates, shares and visibility out of whole-array numpy
+# passes. Peaks above the RSS before the solve: the 1,000-cube room 2.76 GB (11.3 M links, 5.07 M
+# cluster links; 4.8 GB before), the furnace spheres 1.18 GB at 300k faces and 3.26 GB at 1M
+# (5.4 M and 6.2 M cluster links; 6.5 and 16.8 GB before), which now grow with the elements:
+# about 60 bytes a cluster link and 2.7 kB an element (the scene, its occluders, the tree, the
+# operator's P, R and shares). The rates keep the room 1.4x and the spheres 2.3-4x above their
+# peaks; the old element term (816 bytes, the stored size twice) fell short of the spheres'.
 LINK_PEAK_BYTES = 200
-CLUSTER_LINK_PEAK_BYTES = 1024
+CLUSTER_LINK_PEAK_BYTES = 512
+ELEMENT_PEAK_BYTES = 4096
 CHUNK_LINKS = 100_000  # links evaluated at once (bounds the temporaries of their visibility)
 # Cluster links scale their isotropic estimate by the visibility of one representative pair of
 # patches (since 2026-12-05 the two facing each other most, ClusterTree.facing_patch; the middle
@@ -524,7 +531,7 @@ class Hierarchy:
     def _check_memory(self, extra_links: int) -> None:
         links = len(self.links) + len(self.cluster_r) + extra_links
         estimate = ((len(self.links) + extra_links) * LINK_PEAK_BYTES
-                    + len(self.cluster_r) * CLUSTER_LINK_PEAK_BYTES + 2 * len(self.el) * ELEMENT_BYTES)
+                    + len(self.cluster_r) * CLUSTER_LINK_PEAK_BYTES + len(self.el) * ELEMENT_PEAK_BYTES)
         _memory.check(f"a hierarchy of {links:,} links and {len(self.el):,} elements", int(estimate),
                       "raise link_tolerance or min_element_size (or use a coarser preset)")
 
