@@ -220,7 +220,8 @@ class LinkOperator(spla.LinearOperator):
 @dataclass
 class _Spread:
     """Oriented cluster links as G holds them: link k takes ``x[column[k]]`` to the patches of
-    its receiving node r[k] (``tree.order[lo:hi]``), each by its ``value`` (the link's factor
+    its receiving node r[k] (``tree.order[lo:hi]``; input patch i is root element i, so that is
+    also its row of G), each by its ``value`` (the link's factor
     times the patch's share, :meth:`ClusterTree.receiver_shares`), link after link. 8 bytes a
     value, where a sparse matrix's entry took 12, and 28 while it was built (the 1M-face
     sphere's peak)."""
