@@ -8,7 +8,7 @@ start with n^2 links. A link (r gathers from s) between nodes, one of them a clu
 - bounded: any point of r sees at most ``A_s cos_r cos_s / (pi d^2)`` of s, with ``d`` the gap
   between the two spheres and the cosines bounded over the normal cones (1 if they overlap),
   and at most ``sin^2`` of the angle the two cones leave between them (the band of directions
-  both can face, :meth:`ClusterTree.orientation_bound`): ``err = max_c(rho_r,c B_s,c) * that``;
+  both can face, :meth:`ClusterTree.bound`): ``err = max_c(rho_r,c B_s,c) * that``;
 - estimated isotropically when kept: the power r gets is ``B_s P_r(u) P_s(-u) / (pi d^2)``,
   with ``P(u) = sum A_i max(0, n_i . u)`` the projected area of a node's faces toward the
   other's centre ``u`` (faces are one-sided), shared out over r's patches by how each faces s
