@@ -267,20 +267,22 @@ class ClusterTree:
 
         Returns (link, patch, share): one row per link and patch of its r.
         """
-        members = self.hi[r] - self.lo[r]
-        share = self.receiver_shares(r, s, np.ones(len(r)))
-        return np.repeat(np.arange(len(r)), members), self.order[_ranges(self.lo[r], self.hi[r])[1]], share
+        _, share = self.receiver_shares(r, s, np.ones(len(r)))
+        return (np.repeat(np.arange(len(r)), self.hi[r] - self.lo[r]), self.order[_ranges(self.lo[r], self.hi[r])[1]],
+                share)
 
-    def receiver_shares(self, r: np.ndarray, s: np.ndarray, scale: np.ndarray) -> np.ndarray:
-        """The shares of :meth:`oriented_shares` times ``scale`` (one per link), link after link,
-        each receiver's patches in tree order (``order[lo[r]:hi[r]]``)."""
+    def receiver_shares(self, r: np.ndarray, s: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(start, share): the shares of :meth:`oriented_shares` times ``scale`` (one per link),
+        link after link, each receiver's patches in tree order (``order[lo[r]:hi[r]]``); link k's
+        begin at ``start[k]``."""
         members = self.hi[r] - self.lo[r]
+        start = np.cumsum(members) - members
         share = np.empty(int(members.sum()))
         child, patch, lo, hi, order, normals, areas, centre, axis, cone = self._kernel_tree()
         receiver_shares(np.asarray(r, np.int64), np.asarray(s, np.int64), ESTIMATE_DEPTH, child, patch, lo, hi, order,
                         self.centroids, normals, areas, self.area, centre, axis, cone, self.area_vector,
-                        np.asarray(scale, float), np.cumsum(members) - members, share)
-        return share
+                        np.asarray(scale, float), start, share)
+        return start, share
 
     # ------------------------------------------------------------------ push-pull
     def membership(self, n_roots: int) -> sp.csr_matrix:

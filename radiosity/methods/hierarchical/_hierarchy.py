@@ -228,12 +228,9 @@ class _Spread:
 
     r: np.ndarray
     column: np.ndarray
+    start: np.ndarray  # where link k's values begin
     value: np.ndarray
     tree: ClusterTree
-
-    def __post_init__(self):
-        members = self.tree.hi[self.r] - self.tree.lo[self.r]
-        self.start = np.cumsum(members) - members
 
     @property
     def nbytes(self) -> int:
@@ -735,7 +732,7 @@ class Hierarchy:
         gather.add(column[self.cluster_r[even]], column[self.cluster_s[even]], self.cluster_factor[even])
         # an oriented link has one value per patch of its receiver (tens of millions for a
         # 300k-face sphere): kept link by link, without row and column indices
-        spread = _Spread(r, column[s], tree.receiver_shares(r, s, factor), tree)
+        spread = _Spread(r, column[s], *tree.receiver_shares(r, s, factor), tree)
         return push, ClusterGather(gather.tocsr(), spread), pull
 
     def solve(self, rtol: float, clamp: bool = False) -> tuple[np.ndarray, LinkOperator, np.ndarray, SolveReport]:
