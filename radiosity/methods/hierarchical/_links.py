@@ -22,7 +22,7 @@ from ...formfactors import pair_factors, patch_points
 from ...visibility import FULL, MAYBE, Visibility
 from ._elements import Elements
 
-__all__ = ["link_factors", "ElementVisibility", "adaptive_factors"]
+__all__ = ["link_factors", "source_shares", "ElementVisibility", "adaptive_factors"]
 
 RECEIVER_ORDER = 3  # Gauss points per direction on the receiver: 9 Lambert evaluations per link
 SETTLE_RAY_SAMPLES = 5  # the many-occluder pairs of ElementVisibility.exact trace this**4 rays at least
@@ -71,6 +71,27 @@ def link_factors(el: Elements, r: np.ndarray, s: np.ndarray, order: int = RECEIV
     top = values.max(axis=1)
     spread = top - values.min(axis=1)
     return (mean, spread, top, values - mean[:, None]) if shape else (mean, spread)
+
+
+def source_shares(el: Elements, r: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """(m, 4) float: the share of each child of source ``s`` in the factor F(r -> s) (rows sum to 1).
+
+    The link gathers from the children by these shares instead of from the source's area mean
+    (see ``_hierarchy.SOURCE_SHARES``). Each share is Lambert's factor from r's centroid to the
+    child over their sum (3x3 Gauss points gave the bundled box's objects within 0.07 points of
+    the centroid's answer, at 9 times the cost); where the centroid misses the source (behind
+    its plane, or in it), the children's areas.
+    """
+    children = el.first_child[s][:, None] + np.arange(4)
+    receivers, inverse = np.unique(r, return_inverse=True)
+    centre = el.centroid[receivers]
+    factor = lambert_indexed(centre, el.normal[receivers], el.quads, np.repeat(inverse, 4), children.ravel())
+    # one-sided sources (the children lie in their parent's plane)
+    front = np.einsum("mc,mc->m", centre[inverse] - el.centroid[s], el.normal[s]) > 0
+    factor = np.where(front[:, None], np.clip(factor.reshape(-1, 4), 0.0, None), 0.0)
+    total = factor.sum(axis=1, keepdims=True)
+    area = el.area[children]
+    return np.where(total > 0, factor / np.where(total > 0, total, 1.0), area / area.sum(axis=1, keepdims=True))
 
 
 def adaptive_factors(el: Elements, r: np.ndarray, s: np.ndarray, rtol: float) -> np.ndarray:
