@@ -152,7 +152,9 @@ def test_source_shares_are_each_childs_part_of_the_factor_from_the_receivers_cen
     assert len(split) > 100
     pick = split[:: len(split) // 40]
     shares = source_shares(el, links.r[pick], links.s[pick])
-    np.testing.assert_allclose(links.source_shares[pick], shares, rtol=1e-6)  # what G was built with
+    children = K.gather.parts[0]  # what G was built with
+    at = np.searchsorted(np.flatnonzero(el.first_child[links.s] >= 0), pick)
+    np.testing.assert_allclose(children.shares[at], shares, rtol=1e-6)
     np.testing.assert_allclose(shares.sum(axis=1), 1.0, rtol=1e-12)
     for k, (r, s) in enumerate(zip(links.r[pick], links.s[pick])):
         children = el.quads[el.first_child[s] + np.arange(4)]
@@ -451,8 +453,9 @@ def test_push_pull_conserves_power_through_clusters(furnace):
 
 def test_oriented_cluster_links_gather_as_their_matrix_entries_would():
     """G keeps its oriented cluster links link by link (a value per patch of the receiver, no
-    indices); G @ x and G.T @ y equal those of the sparse matrix with one entry per link and
-    patch (the form it replaced, whose build was the 1M-face sphere's peak)."""
+    indices), and its element links to sources with children as a value and four shares each;
+    G @ x and G.T @ y equal those of the sparse matrix with one entry per link and patch (and
+    child): the form they replaced, whose build was the 1M-face sphere's peak."""
     import scipy.sparse as sp
 
     from radiosity.methods.hierarchical._hierarchy import ORIENT_CONE
@@ -469,7 +472,12 @@ def test_oriented_cluster_links_gather_as_their_matrix_entries_would():
     link, patch, share = tree.oriented_shares(r, s)
     column = np.where(tree.patch >= 0, tree.patch, len(hier.el) + tree.column)
     entries = sp.csr_matrix((hier.cluster_factor[oriented][link] * share, (patch, column[s][link])), shape=G.shape)
-    full = G.matrix + entries
+    children = G.parts[0]  # links gathering from their source's children, four entries each
+    assert len(children.r) > 20
+    child_entries = sp.csr_matrix(((children.value[:, None] * children.shares).ravel(),
+                                   (np.repeat(children.r, 4), (children.first[:, None] + np.arange(4)).ravel())),
+                                  shape=G.shape)
+    full = G.matrix + entries + child_entries
     rng = np.random.default_rng(2)
     x, y = rng.random(G.shape[1]), rng.random(G.shape[0])
     np.testing.assert_allclose(G @ x, full @ x, rtol=1e-12)

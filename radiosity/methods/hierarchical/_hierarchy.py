@@ -46,6 +46,7 @@ from ._clusters import CLUSTER_MIN_ROOTS, ClusterTree
 from ._clusters_kernel import collect_links, spread_links
 from ._elements import Elements
 from ._links import RECEIVER_ORDER, ElementVisibility, adaptive_factors, link_factors, source_shares
+from ._links_kernel import collect_children, gather_children
 
 __all__ = ["Hierarchy", "LinkOperator", "Links", "HierarchyStats"]
 
@@ -80,7 +81,7 @@ ELEMENT_PEAK_BYTES = 4096
 # out dark at draft, the ceiling by 1.7-1.9% (it sees the walls' upper parts best, brighter than
 # their means; on the 2.4 cm leaves the free links' error was all this covariance and none the
 # factors'), and refining further made it worse. With it: 3.5 mm at draft, worst object 1.92% ->
-# 0.71% for 17% more time (each such link is four entries of G).
+# 0.71% for 13% more time (such a link is a value and four shares in G, class _Children).
 SOURCE_SHARES = True
 CHUNK_LINKS = 100_000  # links evaluated at once (bounds the temporaries of their visibility)
 # Cluster links scale their isotropic estimate by the visibility of one representative pair of
@@ -145,9 +146,6 @@ class Links:
     # (the largest |deviation|) / 127: what the receiver's variation test sums (9 bytes a link)
     shape: np.ndarray
     shape_scale: np.ndarray
-    # (m, 4) float32: each child's share of the factor when the source has children, NaN until
-    # first gathered that way (Hierarchy._gather_entries); children never change once made
-    source_shares: np.ndarray
 
     @classmethod
     def empty(cls) -> "Links":
@@ -156,7 +154,7 @@ class Links:
         b = np.zeros(0, bool)
         q = RECEIVER_ORDER ** 2
         return cls(i, i.copy(), z, z.copy(), z.copy(), z.copy(), b, b.copy(), np.zeros((0, q), np.int8),
-                   np.zeros(0, np.float32), np.zeros((0, 4), np.float32))
+                   np.zeros(0, np.float32))
 
     def __len__(self) -> int:
         return len(self.r)
@@ -260,33 +258,61 @@ class _Spread:
         x += np.bincount(self.column, taken, minlength=len(x))
 
 
-class ClusterGather(spla.LinearOperator):
-    """G of a clustered hierarchy: a sparse matrix (element links, cluster links spread evenly)
-    plus the oriented cluster links (:class:`_Spread`)."""
+@dataclass
+class _Children:
+    """Element links whose source has children, as G holds them: link k adds ``value[k]``
+    times the ``shares[k]``-weighted radiosities of the four children ``first[k] + 0..3`` to
+    row r[k] (:meth:`Hierarchy._gather_entries`). 32 bytes a link, where four entries of a
+    sparse matrix took 48, and 112 while it was built (the bundled box at fine, 3.5 mm, peaked
+    2 GB higher that way)."""
 
-    def __init__(self, matrix: sp.csr_matrix, spread: _Spread):
-        self.matrix, self.spread = matrix, spread
+    r: np.ndarray
+    first: np.ndarray
+    value: np.ndarray
+    shares: np.ndarray
+
+    @property
+    def nbytes(self) -> int:
+        return self.r.nbytes + self.first.nbytes + self.value.nbytes + self.shares.nbytes
+
+    def add_gathered(self, x: np.ndarray, y: np.ndarray) -> None:
+        """y += (these links of G) @ x, for one vector."""
+        gather_children(self.r, self.first, self.value, self.shares, x, y)
+
+    def add_collected(self, y: np.ndarray, x: np.ndarray) -> None:
+        """x += (these links of G).T @ y, for one vector."""
+        collect_children(self.r, self.first, self.value, self.shares, y, x)
+
+
+class Gather(spla.LinearOperator):
+    """G: a sparse matrix (element links whose source is a leaf, cluster links spread evenly)
+    plus parts applied link by link (:class:`_Children`, :class:`_Spread`)."""
+
+    def __init__(self, matrix: sp.csr_matrix, parts: list):
+        self.matrix, self.parts = matrix, parts
         super().__init__(dtype=np.float64, shape=matrix.shape)
 
     @property
     def nbytes(self) -> int:
-        return matrix_bytes(self.matrix) + self.spread.nbytes
+        return matrix_bytes(self.matrix) + sum(p.nbytes for p in self.parts)
 
     def _matvec(self, x):
         x = np.ascontiguousarray(np.ravel(x), dtype=float)
         y = self.matrix @ x
-        self.spread.add_gathered(x, y)
+        for part in self.parts:
+            part.add_gathered(x, y)
         return y
 
     def _rmatvec(self, y):
         y = np.ascontiguousarray(np.ravel(y), dtype=float)
         x = self.matrix.T @ y
-        self.spread.add_collected(y, x)
+        for part in self.parts:
+            part.add_collected(y, x)
         return x
 
 
 def matrix_bytes(m) -> int:
-    """Bytes held by a CSR matrix or a ClusterGather."""
+    """Bytes held by a CSR matrix or a Gather."""
     if hasattr(m, "indptr"):
         return m.data.nbytes + m.indices.nbytes + m.indptr.nbytes
     return m.nbytes
@@ -483,8 +509,7 @@ class Hierarchy:
             n = int(keep.sum())
             codes, scale = _shape_codes(deviation[keep])
             parts.append(Links(rr[keep], ss[keep], factor[keep], spread[keep], np.clip(visible[keep], 0, 1),
-                               doubt[keep], partial[keep], np.zeros(n, bool), codes, scale,
-                               np.full((n, 4), np.nan, np.float32)))
+                               doubt[keep], partial[keep], np.zeros(n, bool), codes, scale))
             lists.append(Undecided(count, occ).take(keep))
         if not parts:
             return Links.empty(), Undecided(np.zeros(0, np.int64), np.zeros(0, np.int64))
@@ -707,11 +732,8 @@ class Hierarchy:
         pull = sp.csr_matrix((share, (elements, rows)), shape=(ne, nl))
         links = len(self.links)
         if self.tree is None:
-            count, blocks = self._gather_entries()
-            gather = _Triplets(count, ne)
-            for block in blocks:
-                gather.add(*block)
-            gather = gather.tocsr()
+            (r, s, value), children = self._gather_entries()
+            gather = Gather(sp.csr_matrix((value, (r, s)), shape=(ne, ne)), [children])
         else:
             push, gather, pull = self._with_clusters(push, pull, leaves)
             links += len(self.cluster_r)
@@ -724,28 +746,27 @@ class Hierarchy:
             K.row_scale = np.where(over, 1.0 / np.where(over, total, 1.0), 1.0)
         return K, leaves
 
-    def _gather_entries(self) -> tuple[int, list]:
-        """G's entries for the element links: their count and (rows, columns, values) blocks.
+    def _gather_entries(self) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], _Children]:
+        """G's element links: (rows, columns, values) of those whose source is a leaf, and
+        the others as a :class:`_Children`.
 
         A link whose source has children gathers from them, each by its share of the link's
-        factor (:func:`._links.source_shares`, computed once a link), instead of from the
-        source's area mean (see ``SOURCE_SHARES``).
+        factor (:func:`._links.source_shares`; four Lambert factors a link, each time an
+        operator is made: kept with the links, their 16 bytes a link went through every copy
+        refinement makes), instead of from the source's area mean (see ``SOURCE_SHARES``).
         """
         links, el = self.links, self.el
         value = links.factor * links.visible
-        split = np.flatnonzero(el.first_child[links.s] >= 0) if SOURCE_SHARES else np.zeros(0, np.int64)
-        new = split[np.isnan(links.source_shares[split, 0])]
-        for a in range(0, len(new), CHUNK_LINKS):
-            part = new[a:a + CHUNK_LINKS]
-            links.source_shares[part] = source_shares(el, links.r[part], links.s[part])
-        whole = np.ones(len(links), bool)
-        whole[split] = False
-        blocks = [(links.r[whole], links.s[whole], value[whole])]
-        for a in range(0, len(split), CHUNK_LINKS):
-            part = split[a:a + CHUNK_LINKS]
-            blocks.append((np.repeat(links.r[part], 4), (el.first_child[links.s[part]][:, None] + np.arange(4)).ravel(),
-                           (value[part][:, None] * links.source_shares[part]).ravel()))
-        return int(whole.sum()) + 4 * len(split), blocks
+        split = el.first_child[links.s] >= 0 if SOURCE_SHARES else np.zeros(len(links), bool)
+        at = np.flatnonzero(split)
+        shares = np.empty((len(at), 4), np.float32)
+        for a in range(0, len(at), CHUNK_LINKS):
+            part = at[a:a + CHUNK_LINKS]
+            shares[a:a + CHUNK_LINKS] = source_shares(el, links.r[part], links.s[part])
+        index = np.int32 if len(el) < np.iinfo(np.int32).max else np.int64
+        children = _Children(links.r[at].astype(index), el.first_child[links.s[at]].astype(index), value[at], shares)
+        whole = ~split
+        return (links.r[whole], links.s[whole], value[whole]), children
 
     def _with_clusters(self, push, pull, leaves):
         """P, G, R extended by the cluster nodes (columns/rows after the elements).
@@ -765,15 +786,15 @@ class Hierarchy:
         oriented = (tree.patch[self.cluster_r] < 0) & (tree.cone[self.cluster_r] > ORIENT_CONE)
         even = ~oriented
         r, s, factor = self.cluster_r[oriented], self.cluster_s[oriented], self.cluster_factor[oriented]
-        count, blocks = self._gather_entries()
-        gather = _Triplets(count + int(even.sum()), ne + len(tree.internal))
-        for block in blocks:
-            gather.add(*block)
+        (lr, ls, lvalue), children = self._gather_entries()
+        gather = _Triplets(len(lr) + int(even.sum()), ne + len(tree.internal))
+        gather.add(lr, ls, lvalue)
+        del lr, ls, lvalue
         gather.add(column[self.cluster_r[even]], column[self.cluster_s[even]], self.cluster_factor[even])
         # an oriented link has one value per patch of its receiver (tens of millions for a
         # 300k-face sphere): kept link by link, without row and column indices
         spread = _Spread(r, column[s], *tree.receiver_shares(r, s, factor), tree)
-        return push, ClusterGather(gather.tocsr(), spread), pull
+        return push, Gather(gather.tocsr(), [children, spread]), pull
 
     def solve(self, rtol: float, clamp: bool = False) -> tuple[np.ndarray, LinkOperator, np.ndarray, SolveReport]:
         """Leaf radiosities (l, 3) of B = E + rho K B; element radiosities are pulled from them.
