@@ -91,7 +91,9 @@ def source_shares(el: Elements, r: np.ndarray, s: np.ndarray) -> np.ndarray:
     factor = np.where(front[:, None], np.clip(factor.reshape(-1, 4), 0.0, None), 0.0)
     total = factor.sum(axis=1, keepdims=True)
     area = el.area[children]
-    return np.where(total > 0, factor / np.where(total > 0, total, 1.0), area / area.sum(axis=1, keepdims=True))
+    area_total = area.sum(axis=1, keepdims=True)
+    by_area = np.where(area_total > 0, area / np.where(area_total > 0, area_total, 1.0), 0.25)
+    return np.where(total > 0, factor / np.where(total > 0, total, 1.0), by_area)
 
 
 def adaptive_factors(el: Elements, r: np.ndarray, s: np.ndarray, rtol: float) -> np.ndarray:
