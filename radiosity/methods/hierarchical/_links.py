@@ -83,11 +83,9 @@ def source_shares(el: Elements, r: np.ndarray, s: np.ndarray) -> np.ndarray:
     its plane, or in it), the children's areas.
     """
     children = el.first_child[s][:, None] + np.arange(4)
-    receivers, inverse = np.unique(r, return_inverse=True)
-    centre = el.centroid[receivers]
-    factor = lambert_indexed(centre, el.normal[receivers], el.quads, np.repeat(inverse, 4), children.ravel())
+    factor = lambert_indexed(el.centroid, el.normal, el.quads, np.repeat(r, 4), children.ravel())
     # one-sided sources (the children lie in their parent's plane)
-    front = np.einsum("mc,mc->m", centre[inverse] - el.centroid[s], el.normal[s]) > 0
+    front = np.einsum("mc,mc->m", el.centroid[r] - el.centroid[s], el.normal[s]) > 0
     factor = np.where(front[:, None], np.clip(factor.reshape(-1, 4), 0.0, None), 0.0)
     total = factor.sum(axis=1, keepdims=True)
     area = el.area[children]
