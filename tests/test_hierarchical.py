@@ -137,8 +137,8 @@ def test_source_shares_take_the_bias_out_of_the_cornell_box_at_draft():
 
 def test_source_shares_are_each_childs_part_of_the_factor_from_the_receivers_centroid():
     """A link whose source has children gathers from each by Lambert's factor from the
-    receiver's centroid to it over their sum; G holds those four entries instead of one, and
-    its row sums (what the receiver gathers from a uniform source) do not change."""
+    receiver's centroid to it over their sum; G holds the link's value and those four shares,
+    and its row sums (what the receiver gathers from a uniform source) do not change."""
     from radiosity.methods.hierarchical._links import source_shares
 
     scene = radiosity.load_scene(radiosity.bundled_scene("cornell_box"))
@@ -152,13 +152,12 @@ def test_source_shares_are_each_childs_part_of_the_factor_from_the_receivers_cen
     assert len(split) > 100
     pick = split[:: len(split) // 40]
     shares = source_shares(el, links.r[pick], links.s[pick])
-    children = K.gather.parts[0]  # what G was built with
-    at = np.searchsorted(np.flatnonzero(el.first_child[links.s] >= 0), pick)
-    np.testing.assert_allclose(children.shares[at], shares, rtol=1e-6)
+    built = K.gather.parts[0]  # the shares G was built with, one row per link of ``split``
+    np.testing.assert_allclose(built.shares[np.searchsorted(split, pick)], shares, rtol=1e-6)
     np.testing.assert_allclose(shares.sum(axis=1), 1.0, rtol=1e-12)
     for k, (r, s) in enumerate(zip(links.r[pick], links.s[pick])):
-        children = el.quads[el.first_child[s] + np.arange(4)]
-        factor = radiosity.point_to_polygons(el.centroid[r][None], el.normal[r][None], children)[0]
+        quads = el.quads[el.first_child[s] + np.arange(4)]
+        factor = radiosity.point_to_polygons(el.centroid[r][None], el.normal[r][None], quads)[0]
         np.testing.assert_allclose(shares[k], factor / factor.sum(), rtol=1e-9, atol=1e-12)
     rows = np.bincount(links.r, weights=links.factor * links.visible, minlength=len(el))
     np.testing.assert_allclose(K.gather @ np.ones(len(el)), rows, rtol=1e-6, atol=1e-15)
