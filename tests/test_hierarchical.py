@@ -383,6 +383,35 @@ def test_furnace_box_near_a_wall_at_the_draft_element_size(tmp_path):
     assert np.abs(error).max() < 0.02
 
 
+@pytest.mark.parametrize("measured", [True, False])
+def test_a_partly_visible_link_measures_its_visibility_at_each_receiver_point(monkeypatch, measured):
+    """A floor under a light, its left 40% shadowed by a plate 5 cm above it. The floor's link
+    to the light is partly visible (V about 0.6 over the floor), but its Gauss points under the
+    plate see none of the light. What the receiver's variation test sums at each point is F V
+    there less its mean: negative under the plate, positive beside it. Taking the link's mean V
+    instead, the leaves under the plate would get the light the plate hides."""
+    from radiosity.formfactors import patch_points
+    from radiosity.methods.hierarchical import _hierarchy
+
+    monkeypatch.setattr(_hierarchy, "RECEIVER_VISIBILITY", measured)
+    quads = np.array([rect(0, 1, 0, 1, 0), rect(0, 1, 0, 1, 1, down=True), rect(-0.2, 0.4, -0.2, 1.2, 0.05, down=True)])
+    n = len(quads)
+    scene = radiosity.Scene(objects=["floor", "light", "plate"], patch_quads=quads, patch_object=np.arange(n),
+                            patch_face=np.arange(n), reflectance=np.full((n, 3), 0.5),
+                            emission=np.array([[0.0] * 3, [1.0] * 3, [0.0] * 3]))
+    hier = build_hierarchy(scene, Options.from_preset("draft"))
+    links, _ = hier._evaluate(np.array([0]), np.array([1]))
+    assert links.partial[0] and 0.4 < links.visible[0] < 0.8
+    deviation = links.shape[0] * links.shape_scale[0] / 127
+    x = patch_points(quads[:1], 3)[0][0, :, 0]
+    shadowed, lit = x < 0.3, x > 0.5
+    if measured:
+        assert np.all(deviation[shadowed] < -0.5 * links.factor[0] * links.visible[0])
+        assert np.all(deviation[lit] > 0)
+    else:  # the factor's deviation alone is symmetric about the floor's middle
+        np.testing.assert_allclose(np.sort(deviation[shadowed]), np.sort(deviation[lit]), atol=1e-3 * links.factor[0])
+
+
 def test_leaf_tolerance_bounds_what_the_levels_push_onto_the_leaves(tmp_path):
     """The room of the test above at draft: each link meets eps, but a wall element's links to
     the far room all lean the same way across it. Splitting the elements whose links, summed at

@@ -985,6 +985,26 @@ class Visibility:
             out[part] = np.where(np.isnan(frac), 1.0, frac)  # NaN: j wholly on the point's horizon, F = 0
         return out
 
+    def points_ray_fraction(self, points: np.ndarray, normals: np.ndarray, j: np.ndarray,
+                            lists: tuple[np.ndarray, np.ndarray], key: np.ndarray) -> np.ndarray:
+        """(m, q) kernel-weighted fraction of patch j[p] that rays from each point points[p, a] see.
+
+        ``lists`` (starts, occ): pair p's possible occluders (CSR over the m pairs, from the
+        classification of the patch that holds the points: a point's segments are a subset of its
+        patch's). Each point traces ``samples**2`` rays to the same stratified samples of j
+        (``key``). A point wholly behind j's horizon (no ray carries weight) counts as seeing it:
+        its factor to j is 0.
+        """
+        m, q = points.shape[:2]
+        if m == 0:
+            return np.ones((m, q))
+        starts, occ = lists
+        pair = np.repeat(np.arange(m), q)
+        frac, _ = self._weighted_fraction(points.reshape(m * q, 1, 3), np.ones((m * q, 1)), np.repeat(normals, q, axis=0),
+                                          np.repeat(j, q), self.samples, np.repeat(key, q),
+                                          _subset_lists(starts, occ, pair))
+        return np.where(np.isnan(frac), 1.0, frac).reshape(m, q)
+
     # ------------------------------------------------------------------ rays
     def _occluder(self):
         """The Embree scene of the occluder patches (every patch with ``cull=False``).

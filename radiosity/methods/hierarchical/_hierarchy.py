@@ -41,6 +41,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ... import _memory
+from ...formfactors import patch_points
 from ...visibility import Visibility
 from ._clusters import CLUSTER_MIN_ROOTS, ClusterTree
 from ._clusters_kernel import collect_links, spread_links
@@ -128,6 +129,10 @@ SETTLE_LATER = True
 INHERIT_OCCLUDERS = True
 # Share of an undecided link's factor left in doubt when all its rays agree (see _visibility_doubt).
 UNANIMOUS_DOUBT = 1.0
+# Partly visible links whose receiver can split measure their visibility at each of the
+# receiver's Gauss points too (rays from each point), and the receiver's variation test
+# (_varying_receivers) sums F V at each point, not F alone times the link's mean V.
+RECEIVER_VISIBILITY = True
 
 
 @dataclass
@@ -500,6 +505,7 @@ class Hierarchy:
                 spread = np.maximum(spread, _near_bound(self.el, rr, ss, NEAR_BOUND == "near") - (peak - spread))
             ours = None if parents is None else (*parents[:2], parents[2][a:a + CHUNK_LINKS][facing])
             visible, partial, count, occ = self._visibility(rr, ss, ours)
+            deviation = self._visible_deviation(rr, ss, factor, deviation, visible, partial, Undecided(count, occ))
             keep = visible >= 0.0  # FULL pairs come back as -1
             # A crossing pair is as uncertain as its largest point value (the points do not
             # resolve where the plane cuts), or as its crude bound if every point missed.
@@ -514,6 +520,29 @@ class Hierarchy:
         if not parts:
             return Links.empty(), Undecided(np.zeros(0, np.int64), np.zeros(0, np.int64))
         return Links.concat(parts), Undecided.concat(lists)
+
+    def _visible_deviation(self, r: np.ndarray, s: np.ndarray, factor: np.ndarray, deviation: np.ndarray,
+                           visible: np.ndarray, partial: np.ndarray, undecided: Undecided) -> np.ndarray:
+        """(m, q) the visible factor F V at each of r's Gauss points less its mean: what
+        :meth:`_varying_receivers` sums.
+
+        Free links take the factor's deviation. A partly visible link whose receiver can split
+        takes its points' own visibility (rays from each point to the source, against the pair's
+        undecided occluders), since the leaves below get the visibility of r as a whole: a cube
+        face in a room of floating cubes gathered a far wall's light through its links' mean
+        visibility, 0.6 where its half behind a neighbouring cube sees 0.17, and each link met
+        eps alone; that leaf's row summed to 0.945 (``RECEIVER_VISIBILITY``).
+        """
+        out = deviation * np.clip(visible, 0.0, 1.0)[:, None]
+        ask = np.flatnonzero(partial & self.el.splittable[r]) if RECEIVER_VISIBILITY else np.zeros(0, np.int64)
+        if not len(ask):
+            return out
+        points, weights = patch_points(self.el.quads[r[ask]], RECEIVER_ORDER)
+        seen = self.vis.at_points(self.el, r[ask], s[ask], points, undecided.of(ask))
+        values = (deviation[ask] + factor[ask, None]) * seen
+        mean = (values * weights).sum(axis=1) / np.maximum(weights.sum(axis=1), 1e-300)
+        out[ask] = values - mean[:, None]
+        return out
 
     def _visibility(self, r: np.ndarray, s: np.ndarray, parents: tuple[Links, Undecided | None, np.ndarray] | None):
         """(visible, partial, count, occluders) of pairs (see :meth:`ElementVisibility.fractions_undecided`);
@@ -710,7 +739,7 @@ class Hierarchy:
         if not len(idx):
             return np.zeros(len(links), bool)
         r, s = links.r[idx], links.s[idx]
-        weight = (self.rho[self.el.root[r]] * self.B[s]).max(axis=1) * links.visible[idx] * links.shape_scale[idx] / 127
+        weight = (self.rho[self.el.root[r]] * self.B[s]).max(axis=1) * links.shape_scale[idx] / 127
         receivers, row = np.unique(r, return_inverse=True)
         total = np.zeros((len(receivers), links.shape.shape[1]))
         for k in range(total.shape[1]):

@@ -196,6 +196,16 @@ class ElementVisibility:
         self.n_rays += view.n_rays
         return visible, partial, np.bincount(rows, minlength=m), occ
 
+    def at_points(self, el: Elements, r: np.ndarray, s: np.ndarray, points: np.ndarray,
+                  lists: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        """(m, q) visible fraction of s from each point ``points[p]`` on r[p], by rays against
+        the pair's undecided occluders (``lists``: (starts, occluders), CSR over the pairs)."""
+        view = self._over(el)
+        key = r.astype(np.uint64) * np.uint64(len(el)) + s.astype(np.uint64)
+        out = view.points_ray_fraction(points, el.normal[r], s, lists, key)
+        self.n_rays += view.n_rays
+        return out
+
     def exact(self, el: Elements, r: np.ndarray, s: np.ndarray, order: int = 2) -> np.ndarray:
         """(m,) visible fraction by exact shadow clipping at ``order**2`` receiver points.
 
