@@ -27,7 +27,13 @@ __all__ = ["link_factors", "source_shares", "ElementVisibility", "adaptive_facto
 RECEIVER_ORDER = 3  # Gauss points per direction on the receiver: 9 Lambert evaluations per link
 SETTLE_RAY_SAMPLES = 5  # the many-occluder pairs of ElementVisibility.exact trace this**4 rays at least
 CULL_BEHIND = True  # leave out occluders behind either end's plane (ElementVisibility._over)
-MAX_EXACT_OCCLUDERS = 10  # visibility.MAX_UNION: more possible occluders a pair trace rays (ElementVisibility.exact)
+MAX_EXACT_OCCLUDERS = 10
+# Undecided pairs whose first samples**4 rays all agreed (all blocked or all passing) trace
+# max_samples**4 rays again. In the room of 300 floating cubes (draft) a fifth of the partly
+# visible links were unanimous, and their first rays counted as hidden what gaps between
+# cubes let through (exact 0.044 where all 16 rays said 0) more than they counted as free
+# what small cubes hid (0.961 where all said 1): the links' power came out 0.6% short.
+RETRACE_UNANIMOUS = True  # visibility.MAX_UNION: more possible occluders a pair trace rays (ElementVisibility.exact)
 
 
 def link_factors(el: Elements, r: np.ndarray, s: np.ndarray, order: int = RECEIVER_ORDER, *, shape: bool = False
@@ -192,9 +198,23 @@ class ElementVisibility:
             local[part] = np.arange(len(part))
             visible[part] = view.ray_fraction(r[part], s[part], rows=local[rows], occ=occ)
             partial[part] = True
+            if RETRACE_UNANIMOUS:
+                self._retrace_unanimous(view, r, s, part, visible, rows, occ)
             self.n_traced += len(part)
         self.n_rays += view.n_rays
         return visible, partial, np.bincount(rows, minlength=m), occ
+
+    def _retrace_unanimous(self, view, r, s, part, visible, rows, occ) -> None:
+        """Trace the undecided pairs whose first rays all agreed again, with ``max_samples``
+        per direction (see ``RETRACE_UNANIMOUS``); ``visible`` is updated in place."""
+        n = view.max_samples
+        again = part[(visible[part] <= 0.0) | (visible[part] >= 1.0)]
+        if not len(again) or n <= view.samples:
+            return
+        local = np.full(len(r), -1)
+        local[again] = np.arange(len(again))
+        keep = local[rows] >= 0
+        visible[again] = view.ray_fraction(r[again], s[again], n, n, rows=local[rows[keep]], occ=occ[keep])
 
     def at_points(self, el: Elements, r: np.ndarray, s: np.ndarray, points: np.ndarray,
                   lists: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
