@@ -19,9 +19,9 @@ clipping.
 
 Each link meeting eps alone does not bound what a receiver's links push onto its leaves
 together (a corner element sees less of every far region than its mean): after each pass, an
-element whose links' point deviations, summed with their weights, exceed ``leaf_tolerance *
-B_ref`` at one of its Gauss points moves all its links to its children
-(:meth:`Hierarchy._varying_receivers`).
+element whose links' point deviations of ``F V`` (a partly visible link's visibility measured
+at each point), summed with their weights, exceed ``leaf_tolerance * B_ref`` at one of its
+Gauss points moves all its links to its children (:meth:`Hierarchy._varying_receivers`).
 
 The bound is per unit area on purpose: a bound on the power itself (times ``A_r``) lets small
 receivers keep links whose factor is wrong by 100% (their power is small), and a closed box
@@ -730,7 +730,9 @@ class Hierarchy:
         its corner leaf gathered 1.15 of its row in a furnace (issue 14); the bundled box's
         floor elements see more of every element of the lamp on one side. The leaves below get
         the mean, so that sum is the error this level pushes onto them. Signed sums keep the
-        leanings that cancel (more of the near walls, less of the far ones) from refining.
+        leanings that cancel (more of the near walls, less of the far ones) from refining. The
+        deviations are of ``F V`` (:meth:`_visible_deviation`): where shadows fall across the
+        receiver, its points see the sources differently.
         """
         can = self.el.splittable[links.r]
         if not can.any():

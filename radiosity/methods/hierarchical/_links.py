@@ -27,13 +27,13 @@ __all__ = ["link_factors", "source_shares", "ElementVisibility", "adaptive_facto
 RECEIVER_ORDER = 3  # Gauss points per direction on the receiver: 9 Lambert evaluations per link
 SETTLE_RAY_SAMPLES = 5  # the many-occluder pairs of ElementVisibility.exact trace this**4 rays at least
 CULL_BEHIND = True  # leave out occluders behind either end's plane (ElementVisibility._over)
-MAX_EXACT_OCCLUDERS = 10
+MAX_EXACT_OCCLUDERS = 10  # visibility.MAX_UNION: more possible occluders a pair trace rays (ElementVisibility.exact)
 # Undecided pairs whose first samples**4 rays all agreed (all blocked or all passing) trace
 # max_samples**4 rays again. In the room of 300 floating cubes (draft) a fifth of the partly
 # visible links were unanimous, and their first rays counted as hidden what gaps between
 # cubes let through (exact 0.044 where all 16 rays said 0) more than they counted as free
 # what small cubes hid (0.961 where all said 1): the links' power came out 0.6% short.
-RETRACE_UNANIMOUS = True  # visibility.MAX_UNION: more possible occluders a pair trace rays (ElementVisibility.exact)
+RETRACE_UNANIMOUS = True
 
 
 def link_factors(el: Elements, r: np.ndarray, s: np.ndarray, order: int = RECEIVER_ORDER, *, shape: bool = False
@@ -208,8 +208,10 @@ class ElementVisibility:
         """Trace the undecided pairs whose first rays all agreed again, with ``max_samples``
         per direction (see ``RETRACE_UNANIMOUS``); ``visible`` is updated in place."""
         n = view.max_samples
+        if n <= view.samples:
+            return
         again = part[(visible[part] <= 0.0) | (visible[part] >= 1.0)]
-        if not len(again) or n <= view.samples:
+        if not len(again):
             return
         local = np.full(len(r), -1)
         local[again] = np.arange(len(again))
