@@ -975,34 +975,29 @@ class Visibility:
             self.n_exact_rows += len(r)
             out[part] = np.where(unocc > 0, 1.0 - np.minimum(hidden, unocc) / np.where(unocc > 0, unocc, 1.0), 1.0)
         else:
-            ones = np.ones((len(part), 1))
             key = np.arange(len(part), dtype=np.uint64)
             local = np.full(len(j), -1)
             local[part] = np.arange(len(part))
             lists = _occluder_lists(local[rows], occ, len(part)) if self.cull else None
-            frac, _ = self._weighted_fraction(points[part][:, None, :], ones, normals[part], j[part],
-                                              self.samples, key, lists)
-            out[part] = np.where(np.isnan(frac), 1.0, frac)  # NaN: j wholly on the point's horizon, F = 0
+            out[part] = self.points_ray_fraction(points[part][:, None, :], normals[part], j[part], lists, key)[:, 0]
         return out
 
     def points_ray_fraction(self, points: np.ndarray, normals: np.ndarray, j: np.ndarray,
-                            lists: tuple[np.ndarray, np.ndarray], key: np.ndarray) -> np.ndarray:
+                            lists: tuple[np.ndarray, np.ndarray] | None, key: np.ndarray) -> np.ndarray:
         """(m, q) kernel-weighted fraction of patch j[p] that rays from each point points[p, a] see.
 
-        ``lists`` (starts, occ): pair p's possible occluders (CSR over the m pairs, from the
+        ``lists`` (starts, occ): pair p's possible occluders (CSR over the m pairs, e.g. from the
         classification of the patch that holds the points: a point's segments are a subset of its
-        patch's). Each point traces ``samples**2`` rays to the same stratified samples of j
-        (``key``). A point wholly behind j's horizon (no ray carries weight) counts as seeing it:
-        its factor to j is 0.
+        patch's); None: Embree against the occluder patches. Each point traces ``samples**2``
+        rays to the same stratified samples of j (``key``). A point wholly behind j's horizon (no
+        ray carries weight) counts as seeing it: its factor to j is 0.
         """
         m, q = points.shape[:2]
         if m == 0:
             return np.ones((m, q))
-        starts, occ = lists
-        pair = np.repeat(np.arange(m), q)
+        per_point = None if lists is None else _subset_lists(*lists, np.repeat(np.arange(m), q))
         frac, _ = self._weighted_fraction(points.reshape(m * q, 1, 3), np.ones((m * q, 1)), np.repeat(normals, q, axis=0),
-                                          np.repeat(j, q), self.samples, np.repeat(key, q),
-                                          _subset_lists(starts, occ, pair))
+                                          np.repeat(j, q), self.samples, np.repeat(key, q), per_point)
         return np.where(np.isnan(frac), 1.0, frac).reshape(m, q)
 
     # ------------------------------------------------------------------ rays

@@ -742,8 +742,8 @@ class Hierarchy:
             return np.zeros(len(links), bool)
         r, s = links.r[idx], links.s[idx]
         weight = (self.rho[self.el.root[r]] * self.B[s]).max(axis=1) * links.shape_scale[idx] / 127
-        # per element, not per distinct receiver: bincount over all elements is linear where
-        # np.unique sorted the links (7% of the bundled box's draft solve)
+        # per element, not per distinct receiver: a bincount over all elements needs no sort of
+        # the links (np.unique's; the box at draft, 3.5 mm: 0.150 -> 0.119 s a call)
         worst = np.zeros(len(self.el))
         for k in range(links.shape.shape[1]):
             np.maximum(worst, np.abs(np.bincount(r, weights=weight * links.shape[idx, k], minlength=len(self.el))),

@@ -20,6 +20,7 @@ import numpy as np
 from ...formfactors import lambert_indexed
 from ...formfactors import pair_factors, patch_points
 from ...visibility import FULL, MAYBE, Visibility
+from ...visibility._pairs import _rows_of
 from ._elements import Elements
 
 __all__ = ["link_factors", "source_shares", "ElementVisibility", "adaptive_factors"]
@@ -213,10 +214,8 @@ class ElementVisibility:
         again = part[(visible[part] <= 0.0) | (visible[part] >= 1.0)]
         if not len(again):
             return
-        local = np.full(len(r), -1)
-        local[again] = np.arange(len(again))
-        keep = local[rows] >= 0
-        visible[again] = view.ray_fraction(r[again], s[again], n, n, rows=local[rows[keep]], occ=occ[keep])
+        sub_rows, sub_occ = _rows_of(rows, occ, again, len(r))
+        visible[again] = view.ray_fraction(r[again], s[again], n, n, rows=sub_rows, occ=sub_occ)
 
     def at_points(self, el: Elements, r: np.ndarray, s: np.ndarray, points: np.ndarray,
                   lists: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
@@ -250,15 +249,12 @@ class ElementVisibility:
             for sel, exact in ((part[few], True), (part[~few], False)):
                 if not len(sel):
                     continue
-                local = np.full(m, -1)
-                local[sel] = np.arange(len(sel))
-                keep = local[rows] >= 0
+                sub_rows, sub_occ = _rows_of(rows, occ, sel, m)
                 if exact:
-                    out[sel] = view.exact_fraction(r[sel], s[sel], local[rows[keep]], occ[keep], order)
+                    out[sel] = view.exact_fraction(r[sel], s[sel], sub_rows, sub_occ, order)
                 else:
                     n = max(view.max_samples, SETTLE_RAY_SAMPLES)
-                    out[sel] = view.ray_fraction(r[sel], s[sel], n, n,
-                                                 rows=local[rows[keep]], occ=occ[keep])
+                    out[sel] = view.ray_fraction(r[sel], s[sel], n, n, rows=sub_rows, occ=sub_occ)
             self.n_rays += view.n_rays
         self.n_exact += len(part)
         return np.clip(out, 0.0, 1.0)
