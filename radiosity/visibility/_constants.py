@@ -182,5 +182,6 @@ GOOD, OUT_OF_POINTS, OUT_OF_ROOM = 0, 1, 2
 CAPPED_RTOL_STEP = 0.01
 
 # Pairs whose rays all carry no weight (every sample on the other patch's horizon) take exact
-# shadows at BLIND_ORDER^2 Gauss points of the receiver instead (``Visibility._blind_fraction``).
-BLIND_ORDER = 4
+# shadows at order^2 Gauss points of the receiver instead, at each order of BLIND_ORDERS while
+# no point sees the source (``Visibility._blind_fraction``).
+BLIND_ORDERS = (4, 16)

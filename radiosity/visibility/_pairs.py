@@ -35,7 +35,7 @@ from ..geometry import centroids_and_areas, polygon_normals
 from ..formfactors import (gauss_legendre_01, pair_factors, patch_points, square_cell_corners, square_cell_points,
                            tip_collapsed)
 from . import _occluders
-from ._constants import (BLIND_ORDER, CAPPED_RTOL_STEP, CELL_FALLBACK_ATOL, CELL_RETRY_POINTS, CHUNK_CELL_PAIRS,
+from ._constants import (BLIND_ORDERS, CAPPED_RTOL_STEP, CELL_FALLBACK_ATOL, CELL_RETRY_POINTS, CHUNK_CELL_PAIRS,
                          CHUNK_CLASSIFY, CHUNK_SHADOWS, CHUNK_SQUARE_PAIRS, CHUNK_TRIPLES, GOOD, KINK_BAND,
                          MAX_ROOT_CELLS, MAX_UNION, MAX_UNION_CELLS, OUT_OF_POINTS, PLANE_REL, RAY_TFAR_SHORT,
                          RECEIVE_SMALLER_WIDTHS, SATURATED_REL, SHADOW_MAX_DEPTH, WEIGHT_FLOOR_REL)
@@ -416,7 +416,7 @@ class Visibility:
 
     def ray_fraction(self, i: np.ndarray, j: np.ndarray, samples: int | None = None,
                      max_samples: int | None = None, *, rows: np.ndarray | None = None,
-                     occ: np.ndarray | None = None) -> np.ndarray:
+                     occ: np.ndarray | None = None, blind: bool = True) -> np.ndarray:
         """(m,) kernel-weighted unblocked fraction by stratified rays, refined where they disagree.
 
         Each ray from a sample x on i to a sample y on j is weighted by the area weights of both
@@ -428,6 +428,10 @@ class Visibility:
         that the classification left undecided for its pair (``rows``/``occ`` from
         :meth:`classify`, with ``rows`` indexing i and j; classified here if not given), in
         float64. With ``cull=False`` every ray is cast through Embree against every patch.
+
+        Pairs whose rays all carry no weight take exact shadows (:meth:`blind_fraction`), or
+        with ``blind=False`` come back NaN, for the caller to resolve once however many rays
+        it traces.
         """
         s0 = samples or self.samples
         s1 = max(max_samples or self.max_samples, s0)
@@ -446,14 +450,21 @@ class Visibility:
             redo = np.flatnonzero(~agree)
             sub = None if lists is None else _subset_lists(*lists, redo)
             frac[redo] = self._patch_rays(i[redo], j[redo], s1, key[redo], 3, sub)[0]
-        blind = np.flatnonzero(np.isnan(frac) & ~full)
-        if len(blind):
-            sub = None if lists is None else _subset_lists(*lists, blind)
-            frac[blind] = self._blind_fraction(i[blind], j[blind], sub)
+        unseen = np.flatnonzero(np.isnan(frac) & ~full)
+        if len(unseen) and blind:
+            sub = None if lists is None else _subset_lists(*lists, unseen)
+            frac[unseen] = self._blind_fraction(i[unseen], j[unseen], sub)
         frac[full] = 0.0
         return frac
 
-    def _blind_fraction(self, i, j, lists):
+    def blind_fraction(self, i: np.ndarray, j: np.ndarray, rows: np.ndarray, occ: np.ndarray,
+                       orders: tuple[int, ...] = BLIND_ORDERS) -> np.ndarray:
+        """(m,) :meth:`_blind_fraction` of pairs (i, j) whose possible occluders are ``rows``/``occ``
+        (as from :meth:`classify`, ``rows`` indexing i and j)."""
+        lists = _occluder_lists(rows, occ, len(i))
+        return self._blind_fraction(np.asarray(i, np.int64), np.asarray(j, np.int64), lists, orders)
+
+    def _blind_fraction(self, i, j, lists, orders: tuple[int, ...] = BLIND_ORDERS):
         """Visible fraction, by exact shadows at Gauss points, of pairs whose rays all carried no
         weight: each sample on one patch saw the other's samples on or behind its horizon.
 
@@ -462,8 +473,8 @@ class Visibility:
         2026-12-06, let a roof piece of View3D's hall see a wall of another room through the
         wall between them (F = 2.5e-6 where 0 is exact: its row summed to 1 + 2.6e-6).
         The points go on i, else (where none of them sees j) on j, which has the same visible
-        fraction by reciprocity, then both again at a finer rule; a pair no point sees counts
-        as unblocked.
+        fraction by reciprocity, then both again at each finer rule of ``orders``; a pair no
+        point sees counts as unblocked.
         """
         frac = np.full(len(i), np.nan)
         if lists is None:  # cull=False: the exact classification, not "every patch may block"
@@ -472,7 +483,7 @@ class Visibility:
         else:
             starts, occ = lists
             rows = np.repeat(np.arange(len(i)), np.diff(starts))
-        for order in (BLIND_ORDER, 4 * BLIND_ORDER):
+        for order in orders:
             for recv, src in ((i, j), (j, i)):
                 left = np.flatnonzero(np.isnan(frac))
                 if len(left):

@@ -501,9 +501,14 @@ class Hierarchy:
             facing, crossing = _facing(self.el, rr, ss)
             rr, ss, crossing = rr[facing], ss[facing], crossing[facing]
             factor, spread, peak, deviation = link_factors(self.el, rr, ss, shape=True)
+            # a pair no receiver point sees, and that crosses neither plane, carries nothing: it
+            # is dropped before its visibility is paid for
+            useful = (factor > 0) | crossing
+            rr, ss, crossing, factor, spread, peak, deviation = (
+                x[useful] for x in (rr, ss, crossing, factor, spread, peak, deviation))
             if NEAR_BOUND != "off":
                 spread = np.maximum(spread, _near_bound(self.el, rr, ss, NEAR_BOUND == "near") - (peak - spread))
-            ours = None if parents is None else (*parents[:2], parents[2][a:a + CHUNK_LINKS][facing])
+            ours = None if parents is None else (*parents[:2], parents[2][a:a + CHUNK_LINKS][facing][useful])
             visible, partial, count, occ = self._visibility(rr, ss, ours)
             deviation = self._visible_deviation(rr, ss, factor, deviation, visible, partial, Undecided(count, occ))
             keep = visible >= 0.0  # FULL pairs come back as -1
@@ -511,7 +516,6 @@ class Hierarchy:
             # resolve where the plane cuts), or as its crude bound if every point missed.
             unseen = np.where(peak > 0, peak, _factor_bound(self.el, rr, ss))
             doubt = factor * _visibility_doubt(visible, partial, self.vis.patches.samples) + unseen * crossing
-            keep &= (factor > 0) | crossing
             n = int(keep.sum())
             codes, scale = _shape_codes(deviation[keep])
             parts.append(Links(rr[keep], ss[keep], factor[keep], spread[keep], np.clip(visible[keep], 0, 1),
