@@ -135,6 +135,28 @@ def test_source_shares_take_the_bias_out_of_the_cornell_box_at_draft():
         np.testing.assert_allclose(means[name], value, rtol=0.008, err_msg=name)
 
 
+def test_links_keep_their_undecided_occluders_across_passes_for_their_children():
+    """After a pass, each partly visible link that can still split keeps the occluders its
+    classification left undecided, and the links that cannot split keep none. In the next pass
+    its children are classified against that list instead of walking the occluders' BVH
+    (the 100-cube room: 27 -> 18.5 s), and decide as the walk does."""
+    scene = radiosity.load_scene(radiosity.bundled_scene("cornell_box"))
+    hier = build_hierarchy(scene, Options.from_preset("draft", min_element_rel=1 / 20))
+    hier.refine()
+    hier.solve(1e-10)
+    links, el = hier.links, hier.el
+    can = el.splittable[links.r] | el.splittable[links.s]
+    listed = links.occluders.count > 0
+    np.testing.assert_array_equal(listed, links.partial & can)
+    assert listed.sum() > 100 and (links.partial & ~can).any()
+    ask = links.take(listed)
+    r, s, parent = hier._expand(ask)
+    walked = hier.vis.fractions_undecided(el, r, s, children=True)
+    inherited = hier.vis.fractions_undecided(el, r, s, children=True, candidates=ask.occluders.of(parent))
+    for a, b in zip(walked, inherited):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_source_shares_are_each_childs_part_of_the_factor_from_the_receivers_centroid():
     """A link whose source has children gathers from each by Lambert's factor from the
     receiver's centroid to it over their sum; G holds the link's value and those four shares,
@@ -415,7 +437,7 @@ def test_a_partly_visible_link_measures_its_visibility_at_each_receiver_point(mo
                             patch_face=np.arange(n), reflectance=np.full((n, 3), 0.5),
                             emission=np.array([[0.0] * 3, [1.0] * 3, [0.0] * 3]))
     hier = build_hierarchy(scene, Options.from_preset("draft"))
-    links, _ = hier._evaluate(np.array([0]), np.array([1]))
+    links = hier._evaluate(np.array([0]), np.array([1]))
     assert links.partial[0] and 0.4 < links.visible[0] < 0.8
     deviation = links.shape[0] * links.shape_scale[0] / 127
     x = patch_points(quads[:1], 3)[0][0, :, 0]

@@ -124,8 +124,10 @@ NEAR_RELATIVE = 2.0  # "near": the source's sphere comes closer to r's centroid 
 NEAR_GAP = 0.25  # ... or, whatever its size, the source faces r closer than this many r radii
 TOUCHING_BOUND = 1.0  # the point factor bound of a small source touching r (0: leave it to the points)
 SETTLE_LATER = True
-# Children of a partly visible link are classified against its undecided occluders (kept while
-# it may split in the same pass) instead of walking the occluders' BVH again.
+# Children of a partly visible link are classified against its undecided occluders (kept with
+# the link while it may split, across passes) instead of walking the occluders' BVH again.
+# Until session 31 they were kept within a pass only: in the 100-cube furnace room (draft)
+# 931k children of links split in later passes walked the BVH, 18 of the 26 s.
 INHERIT_OCCLUDERS = True
 # Share of an undecided link's factor left in doubt when all its rays agree (see _visibility_doubt).
 UNANIMOUS_DOUBT = 1.0
@@ -151,6 +153,8 @@ class Links:
     # (the largest |deviation|) / 127: what the receiver's variation test sums (9 bytes a link)
     shape: np.ndarray
     shape_scale: np.ndarray
+    # the undecided occluders of each link while it may split (none for free links)
+    occluders: Undecided = field(default_factory=lambda: Undecided.empty(0))
 
     @classmethod
     def empty(cls) -> "Links":
@@ -164,13 +168,15 @@ class Links:
     def __len__(self) -> int:
         return len(self.r)
 
-    def take(self, mask) -> "Links":
-        return Links(*(getattr(self, f)[mask] for f in self.__dataclass_fields__))
+    def take(self, mask: np.ndarray) -> "Links":
+        """The links where the boolean ``mask`` is set."""
+        return Links(*(getattr(self, f)[mask] for f in _LINK_ARRAYS), occluders=self.occluders.take(mask))
 
     @staticmethod
     def concat(parts: list["Links"]) -> "Links":
         parts = [p for p in parts if len(p)] or [Links.empty()]
-        return Links(*(np.concatenate([getattr(p, f) for p in parts]) for f in Links.__dataclass_fields__))
+        return Links(*(np.concatenate([getattr(p, f) for p in parts]) for f in _LINK_ARRAYS),
+                     occluders=Undecided.concat([p.occluders for p in parts]))
 
 
 @dataclass
@@ -179,10 +185,23 @@ class Undecided:
     kept while its links may split: their children are classified against them only."""
 
     count: np.ndarray  # (n_links,) int
-    occ: np.ndarray  # (count.sum(),) int, link after link
+    occ: np.ndarray  # (count.sum(),) int32, link after link
 
-    def take(self, mask) -> "Undecided":
+    def __post_init__(self):
+        # int32: the lists of the 1,000-cube room's links are tens of millions of entries
+        self.occ = self.occ.astype(np.int32, copy=False)
+
+    @staticmethod
+    def empty(n: int) -> "Undecided":
+        return Undecided(np.zeros(n, np.int64), np.zeros(0, np.int32))
+
+    def take(self, mask: np.ndarray) -> "Undecided":
+        """The lists of the links where the boolean ``mask`` is set."""
         return Undecided(self.count[mask], self.occ[np.repeat(mask, self.count)])
+
+    def only(self, mask: np.ndarray) -> "Undecided":
+        """The same links, with the lists of those where ``mask`` is not set emptied."""
+        return Undecided(np.where(mask, self.count, 0), self.occ[np.repeat(mask, self.count)])
 
     @staticmethod
     def concat(parts: list["Undecided"]) -> "Undecided":
@@ -194,7 +213,10 @@ class Undecided:
         count = self.count[parent]
         starts = np.concatenate([[0], np.cumsum(count)])
         at = np.repeat(first - starts[:-1], count) + np.arange(starts[-1])
-        return starts, self.occ[at]
+        return starts, self.occ[at].astype(np.int64)
+
+
+_LINK_ARRAYS = tuple(f for f in Links.__dataclass_fields__ if f != "occluders")
 
 
 class LinkOperator(spla.LinearOperator):
@@ -477,15 +499,14 @@ class Hierarchy:
         return over
 
     def _evaluate(self, r: np.ndarray, s: np.ndarray,
-                  parents: tuple[Links, Undecided | None, np.ndarray] | None = None) -> tuple[Links, Undecided]:
-        """Estimates of new links, those that cannot carry anything dropped, and their undecided
+                  parents: tuple[Links, np.ndarray] | None = None) -> Links:
+        """Estimates of new links, those that cannot carry anything dropped, with their undecided
         occluders.
 
-        ``parents`` (optional): (links, their undecided occluders or None if not kept, the index
-        of each pair's parent among them) when the pairs are children of split links. A child's
-        segments are a subset of its parent's, so a child of a free link is free without a test,
-        and a child of a partly visible one is classified against its parent's undecided
-        occluders only (by a walk of the BVH where they were not kept).
+        ``parents`` (optional): (links, the index of each pair's parent among them) when the
+        pairs are children of split links. A child's segments are a subset of its parent's, so a
+        child of a free link is free without a test, and a child of a partly visible one is
+        classified against its parent's undecided occluders only.
 
         Dropped: pairs that do not face each other, and pairs an occluder blocks entirely. A
         pair the classification leaves undecided keeps its whole factor as doubt if its rays
@@ -493,7 +514,7 @@ class Hierarchy:
         crosses the other's plane its largest point value (its Gauss points do not resolve
         where the plane cuts): such links refine until their doubt meets ``eps``.
         """
-        parts, lists = [], []
+        parts = []
         for a in range(0, len(r), CHUNK_LINKS):
             rr, ss = r[a:a + CHUNK_LINKS], s[a:a + CHUNK_LINKS]
             self.stats.links_evaluated += len(rr)
@@ -508,7 +529,7 @@ class Hierarchy:
                 x[useful] for x in (rr, ss, crossing, factor, spread, peak, deviation))
             if NEAR_BOUND != "off":
                 spread = np.maximum(spread, _near_bound(self.el, rr, ss, NEAR_BOUND == "near") - (peak - spread))
-            ours = None if parents is None else (*parents[:2], parents[2][a:a + CHUNK_LINKS][facing][useful])
+            ours = None if parents is None else (parents[0], parents[1][a:a + CHUNK_LINKS][facing][useful])
             visible, partial, count, occ = self._visibility(rr, ss, ours)
             deviation = self._visible_deviation(rr, ss, factor, deviation, visible, partial, Undecided(count, occ))
             keep = visible >= 0.0  # FULL pairs come back as -1
@@ -519,11 +540,9 @@ class Hierarchy:
             n = int(keep.sum())
             codes, scale = _shape_codes(deviation[keep])
             parts.append(Links(rr[keep], ss[keep], factor[keep], spread[keep], np.clip(visible[keep], 0, 1),
-                               doubt[keep], partial[keep], np.zeros(n, bool), codes, scale))
-            lists.append(Undecided(count, occ).take(keep))
-        if not parts:
-            return Links.empty(), Undecided(np.zeros(0, np.int64), np.zeros(0, np.int64))
-        return Links.concat(parts), Undecided.concat(lists)
+                               doubt[keep], partial[keep], np.zeros(n, bool), codes, scale,
+                               occluders=Undecided(count, occ).take(keep)))
+        return Links.concat(parts)
 
     def _visible_deviation(self, r: np.ndarray, s: np.ndarray, factor: np.ndarray, deviation: np.ndarray,
                            visible: np.ndarray, partial: np.ndarray, undecided: Undecided) -> np.ndarray:
@@ -548,18 +567,18 @@ class Hierarchy:
         out[ask] = values - mean[:, None]
         return out
 
-    def _visibility(self, r: np.ndarray, s: np.ndarray, parents: tuple[Links, Undecided | None, np.ndarray] | None):
+    def _visibility(self, r: np.ndarray, s: np.ndarray, parents: tuple[Links, np.ndarray] | None):
         """(visible, partial, count, occluders) of pairs (see :meth:`ElementVisibility.fractions_undecided`);
         with ``parents`` (as :meth:`_evaluate`'s, the index of each of these pairs' parent),
         children of free links are free, children of partly visible ones take their parent's
         undecided occluders as candidates."""
         if parents is None:
             return self.vis.fractions_undecided(self.el, r, s)
-        links, undecided, parent = parents
+        links, parent = parents
         m = len(r)
         visible, partial, count = np.ones(m), np.zeros(m, bool), np.zeros(m, np.int64)
         ask = links.partial[parent]
-        candidates = undecided.of(parent[ask]) if INHERIT_OCCLUDERS and undecided is not None else None
+        candidates = links.occluders.of(parent[ask]) if INHERIT_OCCLUDERS else None
         visible[ask], partial[ask], count[ask], occ = self.vis.fractions_undecided(
             self.el, r[ask], s[ask], children=True, candidates=candidates)
         return visible, partial, count, occ
@@ -598,7 +617,8 @@ class Hierarchy:
 
     def _check_memory(self, extra_links: int) -> None:
         links = len(self.links) + len(self.cluster_r) + extra_links
-        estimate = ((len(self.links) + extra_links) * LINK_PEAK_BYTES
+        # the kept links' occluder lists, and their copy when the pass's links are joined
+        estimate = ((len(self.links) + extra_links) * LINK_PEAK_BYTES + 2 * self.links.occluders.occ.nbytes
                     + len(self.cluster_r) * CLUSTER_LINK_PEAK_BYTES + len(self.el) * ELEMENT_PEAK_BYTES)
         _memory.check(f"a hierarchy of {links:,} links and {len(self.el):,} elements", int(estimate),
                       "raise link_tolerance or min_element_size (or use a coarser preset)")
@@ -660,7 +680,7 @@ class Hierarchy:
             else:
                 r, s, n_cluster_split = self._refine_clusters(np.zeros(1, np.int64), np.zeros(1, np.int64))
             self.stats.initial_links = len(r) + len(self.cluster_r)
-            work, undecided = self._evaluate(r, s)
+            work = self._evaluate(r, s)
             kept = []
             n_first = 0
         else:
@@ -678,14 +698,12 @@ class Hierarchy:
                 kept.append(self.links.take(stuck))
             work = self.links.take(split)
             n_first = int(split.sum())
-            # the undecided occluders of earlier rounds' links are not kept: their children walk
             r, s, parent = self._expand(work)
-            work, undecided = self._evaluate(r, s, (work, None, parent))
+            work = self._evaluate(r, s, (work, parent))
             if self.tree is not None:
                 r, s, n_cluster_split = self._refine_clusters(self.cluster_r, self.cluster_s)
-                more, more_undecided = self._evaluate(r, s)
-                work, undecided = Links.concat([work, more]), Undecided.concat([undecided, more_undecided])
-        n_split = n_first + n_cluster_split + self._descend(work, undecided, kept)
+                work = Links.concat([work, self._evaluate(r, s)])
+        n_split = n_first + n_cluster_split + self._descend(work, kept)
         links = Links.concat(kept)
         while np.isfinite(self.leaf_eps):
             # receivers whose gathered radiosity varies across them past leaf_eps, though each
@@ -698,14 +716,16 @@ class Hierarchy:
             n_split += len(todo)
             r, s, parent = self._expand(todo, receiver=True)
             self._check_memory(len(r) + len(kept[0]))
-            work, undecided = self._evaluate(r, s, (todo, None, parent))
-            n_split += self._descend(work, undecided, kept)
+            n_split += self._descend(self._evaluate(r, s, (todo, parent)), kept)
             links = Links.concat(kept)
+        # a link neither of whose ends can split has no children to classify: its list goes
+        can = self.el.splittable
+        links.occluders = links.occluders.only(can[links.r] | can[links.s])
         self.links = links
         self.stats.split_per_round.append(n_split)
         return n_split
 
-    def _descend(self, work: Links, undecided: Undecided, kept: list) -> int:
+    def _descend(self, work: Links, kept: list) -> int:
         """Split the links of ``work`` over eps until every link meets it or is settled; the
         links that stay go to ``kept``. Returns how many were split."""
         n_split = 0
@@ -717,12 +737,12 @@ class Hierarchy:
             kept.append(work.take(~over | work.settled))
             kept.append(self._settle(work.take(stuck)))
             n_split += int(split.sum())
-            todo, todo_undecided = work.take(split), undecided.take(split)
+            todo = work.take(split)
             if not len(todo):
                 break
             r, s, parent = self._expand(todo)
             self._check_memory(len(r) + sum(len(k) for k in kept))
-            work, undecided = self._evaluate(r, s, (todo, todo_undecided, parent))
+            work = self._evaluate(r, s, (todo, parent))
         return n_split
 
     def _varying_receivers(self, links: Links) -> np.ndarray:
