@@ -175,6 +175,12 @@ def test_a_pair_whose_rays_carry_no_weight_is_not_seen_through_a_wall(cull):
     open_vis = make_vis([receiver, source], samples=2, max_samples=4, cull=cull)
     # nothing in the way: the same blind rays fall back to exact shadows, which find no shadow
     np.testing.assert_array_equal(open_vis.ray_fraction(np.array([0, 1]), np.array([1, 0])), 1.0)
+    if cull:  # blind=False leaves them to the caller (the hierarchy resolves them once)
+        i, j = np.array([0, 1]), np.array([1, 0])
+        status, rows, occ = vis.classify(i, j)
+        assert np.isnan(vis.ray_fraction(i, j, rows=rows, occ=occ, blind=False)).all()
+        np.testing.assert_array_equal(vis.blind_fraction(i, j, rows, occ), 0.0)
+        np.testing.assert_array_equal(vis.blind_fraction(i, j, rows, occ, orders=(4,)), 0.0)
 
 
 def test_adaptive_rays_refine_only_partial_pairs():

@@ -189,7 +189,8 @@ class Undecided:
 
     def __post_init__(self):
         # the smallest type that holds them: the lists of a cluttered room's links run to tens
-        # of millions of entries (the 2,120-face furnished room: its peak RSS 3.9 -> 4.9 GB as int32)
+        # of millions of entries (the 2,120-face furnished room peaked at 3.24 GB without the
+        # lists, 4.85 GB with them as int32, 4.09 GB as int16)
         small = self.occ.size == 0 or self.occ.max() < np.iinfo(np.int16).max
         self.occ = self.occ.astype(np.int16 if small else np.int32, copy=False)
         self.count = self.count.astype(np.int32, copy=False)
