@@ -535,7 +535,8 @@ class Hierarchy:
                 spread = np.maximum(spread, _near_bound(self.el, rr, ss, NEAR_BOUND == "near") - (peak - spread))
             ours = None if parents is None else (parents[0], parents[1][a:a + CHUNK_LINKS][facing][useful])
             visible, partial, count, occ = self._visibility(rr, ss, ours)
-            deviation = self._visible_deviation(rr, ss, factor, deviation, visible, partial, Undecided(count, occ))
+            undecided = Undecided(count, occ)
+            deviation = self._visible_deviation(rr, ss, factor, deviation, visible, partial, undecided)
             keep = visible >= 0.0  # FULL pairs come back as -1
             # A crossing pair is as uncertain as its largest point value (the points do not
             # resolve where the plane cuts), or as its crude bound if every point missed.
@@ -545,7 +546,7 @@ class Hierarchy:
             codes, scale = _shape_codes(deviation[keep])
             parts.append(Links(rr[keep], ss[keep], factor[keep], spread[keep], np.clip(visible[keep], 0, 1),
                                doubt[keep], partial[keep], np.zeros(n, bool), codes, scale,
-                               occluders=Undecided(count, occ).take(keep)))
+                               occluders=undecided.take(keep)))
         return Links.concat(parts)
 
     def _visible_deviation(self, r: np.ndarray, s: np.ndarray, factor: np.ndarray, deviation: np.ndarray,
