@@ -197,15 +197,14 @@ def test_adaptive_rays_refine_only_partial_pairs():
 
 # ---------------------------------------------------------------- compiled kernels vs references
 def test_fused_classification_matches_numpy_reference():
+    """The compiled walk against the box-only numpy reference: the same FULL pairs, and where
+    they differ only occluders no segment meets are dropped (the walk's hull)."""
     quads, groups = boxes_scene()
     vis = make_vis(quads, groups)
     i, j = all_pairs(len(quads))
     status, rows, occ = vis.classify(i, j)
-    ref_status, ref_rows, ref_occ = vis._classify(quads[i], quads[j], np.minimum(vis._lo[i], vis._lo[j]),
-                                                  np.maximum(vis._hi[i], vis._hi[j]))
-    np.testing.assert_array_equal(status, ref_status)
     assert {FREE, FULL, MAYBE} <= set(status.tolist())
-    assert sorted(zip(rows.tolist(), occ.tolist())) == sorted(zip(ref_rows.tolist(), ref_occ.tolist()))
+    _assert_tightens_the_box_reference(vis, quads, i, j, status, rows, occ)
     # the classification is a property of the segments between two patches: symmetric
     back, _, _ = vis.classify(j, i)
     np.testing.assert_array_equal(back, status)
@@ -225,10 +224,30 @@ def _segments_meet_quad(p, q, quad):
     return cross & inside
 
 
+def _assert_tightens_the_box_reference(vis, quads, i, j, status, rows, occ, seed=5):
+    """The walk's status and occluders only tighten the box-only reference's, FULL is the same,
+    and no dense segment between the two patches meets an occluder the walk dropped. Returns
+    the dropped (pair, occluder) rows."""
+    rng = np.random.default_rng(seed)
+    ref_status, ref_rows, ref_occ = vis._classify(quads[i], quads[j], np.minimum(vis._lo[i], vis._lo[j]),
+                                                  np.maximum(vis._hi[i], vis._hi[j]))
+    np.testing.assert_array_equal(status == FULL, ref_status == FULL)
+    assert not ((ref_status == FREE) & (status != FREE)).any()
+    got = set(zip(rows.tolist(), occ.tolist()))
+    ref = set(zip(ref_rows[ref_status[ref_rows] == MAYBE].tolist(), ref_occ[ref_status[ref_rows] == MAYBE].tolist()))
+    assert got <= ref
+    dropped = sorted(ref - got)
+    wts = rng.dirichlet(np.ones(4), 300)
+    for r, k in dropped[:400]:
+        p, q = wts @ quads[i[r]], wts[rng.permutation(300)] @ quads[j[r]]
+        assert not _segments_meet_quad(p, q, quads[k]).any()
+    return dropped, ref_status
+
+
 def test_walk_bounded_by_the_pair_hull_drops_only_occluders_no_segment_meets():
-    """Pairs whose box holds many occluders walk the BVH within the faces of their hull too
-    (after HULL_AFTER occluders): the status and occluders may only tighten against the
-    box-only reference, FULL never changes, and no dense segment meets an occluder dropped."""
+    """Each pair's walk is bounded by the faces of its hull too (from its first undecided
+    occluder on): against the box-only reference the status and occluders only tighten, FULL
+    never changes, and no dense segment meets an occluder dropped."""
     rng = np.random.default_rng(5)
     centres = rng.uniform(0, 1, (500, 3))
     u = rng.normal(size=(500, 3))
@@ -243,19 +262,8 @@ def test_walk_bounded_by_the_pair_hull_drops_only_occluders_no_segment_meets():
     keep = i != j
     i, j = i[keep], j[keep]
     status, rows, occ = vis.classify(i, j)
-    ref_status, ref_rows, ref_occ = vis._classify(quads[i], quads[j], np.minimum(vis._lo[i], vis._lo[j]),
-                                                  np.maximum(vis._hi[i], vis._hi[j]))
-    np.testing.assert_array_equal(status == FULL, ref_status == FULL)
-    assert not ((ref_status == FREE) & (status != FREE)).any()
-    got = set(zip(rows.tolist(), occ.tolist()))
-    ref = set(zip(ref_rows[ref_status[ref_rows] == MAYBE].tolist(), ref_occ[ref_status[ref_rows] == MAYBE].tolist()))
-    assert got <= ref
-    dropped = sorted(ref - got)
+    dropped, ref_status = _assert_tightens_the_box_reference(vis, quads, i, j, status, rows, occ)
     assert len(dropped) > 100 and (status == FREE).sum() > (ref_status == FREE).sum()  # the hull did cut
-    wts = rng.dirichlet(np.ones(4), 300)
-    for r, k in dropped[:400]:
-        p, q = wts @ quads[i[r]], wts[rng.permutation(300)] @ quads[j[r]]
-        assert not _segments_meet_quad(p, q, quads[k]).any()
     back, _, _ = vis.classify(j, i)
     np.testing.assert_array_equal(back, status)
 
