@@ -710,19 +710,10 @@ class Hierarchy:
                 work = Links.concat([work, self._evaluate(r, s)])
         n_split = n_first + n_cluster_split + self._descend(work, kept)
         links = Links.concat(kept)
-        while np.isfinite(self.leaf_eps):
-            # receivers whose gathered radiosity varies across them past leaf_eps, though each
-            # of their links meets eps alone: all their links move down to the receiver's children
-            moved = self._varying_receivers(links)
-            if not moved.any():
-                break
-            todo = links.take(moved)
-            kept = [links.take(~moved)]
-            n_split += len(todo)
-            r, s, parent = self._expand(todo, receiver=True)
-            self._check_memory(len(r) + len(kept[0]))
-            n_split += self._descend(self._evaluate(r, s, (todo, parent)), kept)
-            links = Links.concat(kept)
+        del kept, work  # their arrays are in links now
+        if np.isfinite(self.leaf_eps):
+            links, n_moved = self._move_varying_receivers(links)
+            n_split += n_moved
         # a link neither of whose ends can split has no children to classify: its list goes
         can = self.el.splittable
         links.occluders = links.occluders.only(can[links.r] | can[links.s])
@@ -749,6 +740,48 @@ class Hierarchy:
             self._check_memory(len(r) + sum(len(k) for k in kept))
             work = self._evaluate(r, s, (todo, parent))
         return n_split
+
+    def _move_varying_receivers(self, links: Links) -> tuple[Links, int]:
+        """Move all links of each receiver whose gathered radiosity varies across it past
+        ``leaf_eps`` (:meth:`_varying_receivers`; each of its links meets eps alone) down to
+        its children, until none does. Returns the links and how many were split.
+
+        After the first round only the receivers that gained links are tested again (the test
+        is per receiver, and the others' links did not change), and the links that move are
+        marked dead in their part rather than the millions that stay copied out round after
+        round (9% of the 594-face furnished room's solve, with up to 6 rounds a pass). The
+        links come back in the order of moving them one round at a time, as they did.
+        """
+        parts, alive = [links], [np.ones(len(links), bool)]
+        tested, chosen = links, None  # chosen: per part, the mask of its links under test
+        n_split = 0
+        while True:
+            moved = self._varying_receivers(tested)
+            if not moved.any():
+                break
+            todo = tested.take(moved)
+            if chosen is None:
+                alive[0] &= ~moved
+            else:
+                start = 0
+                for live, pick in zip(alive, chosen):
+                    at = np.flatnonzero(pick)
+                    live[at[moved[start:start + len(at)]]] = False
+                    start += len(at)
+            n_split += len(todo)
+            r, s, parent = self._expand(todo, receiver=True)
+            self._check_memory(len(r) + sum(int(a.sum()) for a in alive))
+            new = []
+            n_split += self._descend(self._evaluate(r, s, (todo, parent)), new)
+            parts.append(Links.concat(new))
+            alive.append(np.ones(len(parts[-1]), bool))
+            gained = np.zeros(len(self.el), bool)
+            gained[parts[-1].r] = True
+            chosen = [live & gained[part.r] for part, live in zip(parts, alive)]
+            tested = Links.concat([part.take(pick) for part, pick in zip(parts, chosen)])
+        if len(parts) == 1:
+            return links, n_split
+        return Links.concat([part.take(live) for part, live in zip(parts, alive)]), n_split
 
     def _varying_receivers(self, links: Links) -> np.ndarray:
         """(m,) links whose receiver can split and whose gathered radiosity, summed over its
