@@ -340,6 +340,7 @@ def test_classification_against_listed_candidates_matches_the_walk():
     quads, groups = boxes_scene()
     vis = make_vis(quads, groups)
     vis.closed = False
+    vis.hull_always = True  # as the hierarchy's views: every undecided occluder against the hull
     i, j = all_pairs(len(quads))
     every = np.arange(vis.occluders.n_occluders)
     starts = np.arange(len(i) + 1) * len(every)

@@ -1109,9 +1109,9 @@ def _next_occluder(stack, top, pos, end, lo, hi, olo, ohi, node_lo, node_hi, nod
 # their box) once it has met this many: an occluder whose box lies beyond a face of the hull
 # cannot meet any segment, and is free however _classify_one (conservative) calls it. A pair
 # whose box spans a terrain (a light above, a far ground triangle: thousands of triangles in the
-# box, a handful near the segments) or a cluttered room stops walking most of it. Whatever the
-# count, every undecided occluder is tested against the hull's faces in the end (see
-# _classify_pair), so the walk and classify_listed agree. Until session 32 the hull came after 16
+# box, a handful near the segments) or a cluttered room stops walking most of it. For the
+# hierarchy (hull_always) every undecided occluder is tested against the hull's faces whatever
+# the count (_hull_tested), so the walk and classify_listed agree. Until session 32 the hull came after 16
 # occluders and only those met after it were tested: the 300-cube furnace room's classification
 # of its cluster links' patch pairs took 10.8 s where it now takes 8 s.
 HULL_AFTER = 2
@@ -1189,11 +1189,13 @@ def _classify_pair(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, nod
                    planes, nij, behind):
     """Walk the BVH for one pair; write its MAYBE occluders to out_occ (as many as fit).
 
-    Returns (status, number of MAYBE occluders); a FULL pair stops at its first full occluder.
-    An occluder is MAYBE where :func:`_classify_one` says so and its box lies beyond no face
-    of the pair's hull (``planes``: scratch, made after ``HULL_AFTER`` occluders, from when on
-    the walk leaves out boxes beyond them, or at the end if undecided occluders were met before:
-    they are tested then). With ``behind`` >= 0 an
+    Returns (status, number of MAYBE occluders, number of hull faces in ``planes`` or -1 where
+    the walk made none); a FULL pair stops at its first full occluder.
+    An occluder is MAYBE where :func:`_classify_one` says so and, after ``HULL_AFTER``
+    occluders, its box lies beyond no face of the pair's hull (``planes``: scratch; from then on
+    the walk leaves out boxes beyond them, and the undecided occluders met before are tested
+    too). A walk that met fewer leaves that to :func:`_hull_tested` (``hull_always``). With
+    ``behind`` >= 0 an
     occluder that lies behind the plane of either patch (unit normals ``nij[0]``, ``nij[1]``; see
     :func:`_behind`) is free without a test: the faces of a cube that touch one of its faces.
     """
@@ -1218,15 +1220,25 @@ def _classify_pair(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, nod
             continue
         state = _classify_one(vi, vj, polys, normal, center, inward, kk, tol, si, sj, outside, valid, gi, gj)
         if state == 1:
-            return 1, 0
+            return 1, 0, n_planes
         if state == 2:
             if n_maybe < out_occ.shape[0]:
                 out_occ[n_maybe] = kk
             n_maybe += 1
-    if n_maybe and n_planes < 0:  # fewer than HULL_AFTER met (all of them kept in out_occ)
-        n_planes = _hull_planes(vi, vj, planes, tol)
-        n_maybe = _outside_hull(out_occ, n_maybe, olo, ohi, planes, n_planes, pad)
-    return (2 if n_maybe else 0), n_maybe
+    return (2 if n_maybe else 0), n_maybe, n_planes
+
+
+@njit(cache=True, inline="always")
+def _hull_tested(vi, vj, status, n, n_planes, out_occ, olo, ohi, planes, pad, tol, hull_always):
+    """(status, n) of a :func:`_classify_pair` walk, its undecided occluders out_occ[:n] tested
+    against the pair's hull where it made none (fewer than ``HULL_AFTER`` met; all of them are in
+    out_occ) and ``hull_always``: as :func:`classify_listed` tests its candidates, so that the
+    hierarchy's children get what their own walk gets. The uniform fill leaves it off: one
+    blocker between two plates (a pair meeting one occluder) would pay for the hull for nothing."""
+    if not hull_always or status != 2 or n_planes >= 0:
+        return status, n
+    n = _outside_hull(out_occ, n, olo, ohi, planes, _hull_planes(vi, vj, planes, tol), pad)
+    return (2 if n else 0), n
 
 
 @njit(cache=True, inline="always")
@@ -1368,7 +1380,7 @@ def _group_status(P, nP, Q, nQ, polys, normal, center, inward, olo, ohi, node_lo
 @njit(cache=True)
 def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, ohi, node_lo, node_hi, node_left,
                     node_right, node_start, node_count, order, pad, tol, status, count, first, starts, occ,
-                    na, nb, behind, runs):
+                    na, nb, behind, runs, hull_always):
     """Pairs s..e-1 of :func:`classify_pairs`: first pass (``starts`` empty) or second pass.
 
     In the first pass, runs of pairs with one receiver or one source are classified as a whole
@@ -1403,9 +1415,11 @@ def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, oh
             out = occ[starts[p]:starts[p + 1]]
             if use_normals:
                 nij[0], nij[1] = na[ia[p]], nb[ib[p]]
-            _classify_pair(va[ia[p]], vb[ib[p]], polys, normal, center, inward, olo, ohi, node_lo, node_hi,
-                           node_left, node_right, node_start, node_count, order, pad, tol, out, stack, lo, hi,
-                           si, sj, outside, valid, gi, gj, planes, nij, behind)
+            st, n, n_planes = _classify_pair(va[ia[p]], vb[ib[p]], polys, normal, center, inward, olo, ohi,
+                                             node_lo, node_hi, node_left, node_right, node_start, node_count, order,
+                                             pad, tol, out, stack, lo, hi, si, sj, outside, valid, gi, gj, planes,
+                                             nij, behind)
+            _hull_tested(va[ia[p]], vb[ib[p]], st, n, n_planes, out, olo, ohi, planes, pad, tol, hull_always)
         return
     nmax = max(8, va.shape[1], vb.shape[1])
     P, Q = np.empty((nmax, 3)), np.empty((nmax, 3))
@@ -1435,12 +1449,12 @@ def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, oh
                 for t in range(single_from, single_to):
                     if use_normals:
                         nij[0], nij[1] = na[ia[t]], nb[ib[t]]
-                    st, n = _classify_pair(va[ia[t]], vb[ib[t]], polys, normal, center, inward, olo, ohi, node_lo,
-                                           node_hi, node_left, node_right, node_start, node_count, order, pad, tol,
-                                           first[t], stack, lo, hi, si, sj, outside, valid, gi, gj, planes,
-                                           nij, behind)
-                    status[t] = st
-                    count[t] = n
+                    st, n, n_planes = _classify_pair(va[ia[t]], vb[ib[t]], polys, normal, center, inward, olo, ohi,
+                                                     node_lo, node_hi, node_left, node_right, node_start, node_count,
+                                                     order, pad, tol, first[t], stack, lo, hi, si, sj, outside, valid,
+                                                     gi, gj, planes, nij, behind)
+                    status[t], count[t] = _hull_tested(va[ia[t]], vb[ib[t]], st, n, n_planes, first[t], olo, ohi,
+                                                       planes, pad, tol, hull_always)
                 single_from = single_to
                 continue
             n_ranges -= 1
@@ -1471,14 +1485,15 @@ def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, oh
 
 @njit(cache=True, parallel=True)
 def classify_pairs(va, ia, vb, ib, polys, normal, center, inward, olo, ohi, node_lo, node_hi, node_left,
-                   node_right, node_start, node_count, order, pad, tol, na, nb, behind, runs=True):
+                   node_right, node_start, node_count, order, pad, tol, na, nb, behind, runs=True, hull_always=False):
     """Classify pairs (va[ia[p]], vb[ib[p]]) against every occluder whose box meets theirs.
 
     The pair's box (vertex min/max) is walked down the occluders' BVH (boxes padded by ``pad``);
     each occluder reached is classified by :func:`_classify_one`. With ``behind`` >= 0, occluders
     within ``behind`` of the back of either patch's plane (unit normals ``na``, ``nb`` per row of
     ``va``, ``vb``) are left out; with ``behind`` < 0, ``na`` and ``nb`` are not read (pass (1, 3)).
-    ``runs`` False: no runs of pairs are classified as a whole (see :func:`_classify_block`).
+    ``runs`` False: no runs of pairs are classified as a whole (see :func:`_classify_block`);
+    ``hull_always``: see :func:`_classify_pair`.
 
     Returns
     -------
@@ -1497,7 +1512,7 @@ def classify_pairs(va, ia, vb, ib, polys, normal, center, inward, olo, ohi, node
     for blk in prange(n_blocks):
         _classify_block(blk * _PAIR_BLOCK, min(m, (blk + 1) * _PAIR_BLOCK), va, ia, vb, ib, polys, normal, center,
                         inward, olo, ohi, node_lo, node_hi, node_left, node_right, node_start, node_count, order,
-                        pad, tol, status, count, first, none, none, na, nb, behind, runs)
+                        pad, tol, status, count, first, none, none, na, nb, behind, runs, hull_always)
     starts = np.zeros(m + 1, np.int64)
     for p in range(m):
         starts[p + 1] = starts[p] + count[p]
@@ -1505,7 +1520,7 @@ def classify_pairs(va, ia, vb, ib, polys, normal, center, inward, olo, ohi, node
     for blk in prange(n_blocks):
         _classify_block(blk * _PAIR_BLOCK, min(m, (blk + 1) * _PAIR_BLOCK), va, ia, vb, ib, polys, normal, center,
                         inward, olo, ohi, node_lo, node_hi, node_left, node_right, node_start, node_count, order,
-                        pad, tol, status, count, first, starts, occ, na, nb, behind, runs)
+                        pad, tol, status, count, first, starts, occ, na, nb, behind, runs, hull_always)
     return status, starts, occ
 
 

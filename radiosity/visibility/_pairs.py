@@ -252,6 +252,9 @@ class Visibility:
         # leave out occluders behind either patch's plane in the classification (the hierarchy's
         # elements: a cube face's element kept the faces of its cube that touch it)
         self.cull_behind = False
+        # test every undecided occluder of a walk against the pair's hull, as classify_listed
+        # tests its candidates (the hierarchy's elements: see _exact_kernel._classify_pair)
+        self.hull_always = False
         # receiver points whose shadow union GEOS could not compute directly (see _exact._unite)
         self.union_fallbacks: dict[str, int] = {}
 
@@ -364,7 +367,7 @@ class Visibility:
                                            occ.center, occ.inward, occ.lo, occ.hi, occ.node_lo, occ.node_hi,
                                            occ.node_left, occ.node_right, occ.node_start, occ.node_count,
                                            occ.order, PLANE_REL * self.scale, PLANE_REL * self.scale,
-                                           normals, normals, behind, runs)
+                                           normals, normals, behind, runs, self.hull_always)
             status[s:e] = st
             rows.append(s + np.repeat(np.arange(e - s), np.diff(starts)))
             occs.append(k)

@@ -145,6 +145,9 @@ class ElementVisibility:
         # "partly visible" (issue 14). Done in numpy on the classification's output, the test
         # took half the refinement of a furnished room; the kernel now makes it.
         view.cull_behind = CULL_BEHIND
+        # the children of a link, classified against its undecided occluders, then get what
+        # their own walk would (classify_listed tests every candidate against the pair's hull)
+        view.hull_always = True
         return view
 
     def fractions(self, el: Elements, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
