@@ -47,7 +47,7 @@ from ._clusters import CLUSTER_MIN_ROOTS, ClusterTree
 from ._clusters_kernel import collect_links, spread_links
 from ._elements import Elements
 from ._links import RECEIVER_ORDER, ElementVisibility, adaptive_factors, link_factors, source_shares
-from ._links_kernel import collect_children, gather_children
+from ._links_kernel import collect_children, gather_children, near_bounds
 
 __all__ = ["Hierarchy", "LinkOperator", "Links", "HierarchyStats"]
 
@@ -996,36 +996,10 @@ def _near_bound(el: Elements, r: np.ndarray, s: np.ndarray, near_only: bool) -> 
     cube 10 cm from a 1 m wall: the wall's links saw 0.0012 where its leaf nearest the cube
     sees 0.0073), so this bound replaces their range there.
     """
-    radius_s = np.linalg.norm(el.quads[s] - el.centroid[s][:, None, :], axis=2).max(axis=1)
-    radius_r = np.linalg.norm(el.quads[r] - el.centroid[r][:, None, :], axis=2).max(axis=1)
-    w = el.centroid[s] - el.centroid[r]
-    dist = np.linalg.norm(w, axis=1)
-    d = np.maximum(np.abs(np.einsum("mc,mc->m", w, el.normal[r])), dist - radius_r)
-    height_s = np.einsum("mkc,mc->mk", el.quads[s] - el.centroid[r][:, None, :], el.normal[r])
-    height_r = np.einsum("mkc,mc->mk", el.quads[r] - el.centroid[s][:, None, :], el.normal[s])
-    # the elements are at least this far apart: their spheres' gap, or the lowest vertex of
-    # one above the other's plane (a big wall's sphere holds the cubes in front of it)
-    gap = np.maximum(dist - radius_r - radius_s, np.maximum(height_s.min(axis=1), height_r.min(axis=1)))
-    apart = gap > 0
-    g = np.where(apart, gap, 1.0)
-    h_s, h_r = np.clip(height_s.max(axis=1), 0, None), np.clip(height_r.max(axis=1), 0, None)
-    cos_r, cos_s = np.minimum(1.0, h_s / g), np.minimum(1.0, h_r / g)
-    cone = (radius_s / np.maximum(d, radius_s)) ** 2 * np.minimum(1.0, 2.0 * cos_r)
-    bound = np.minimum(cone, el.area[s] * cos_r * cos_s / (np.pi * g ** 2))
-    # a source as large as the receiver has a peak as wide as the 3x3 points' spacing: they see
-    # it, unless it faces r closer than that spacing (a cabinet's back 1 cm from a wall: the
-    # points of a triangle of its back all missed the wall's element over its apex, 0.0005 for
-    # 0.028); neighbours on a curved surface face the same way, and are left to the points
-    facing = np.einsum("mc,mc->m", el.normal[r], el.normal[s]) < -0.5
-    small = radius_s < NEAR_SMALLER * radius_r
-    use = apart & el.splittable[r] & (small | (facing & (g < NEAR_GAP * radius_r)))
-    if near_only:
-        use &= dist - radius_s < NEAR_RELATIVE * radius_r
-    # a small source touching r (a wall element at the foot of a long floor strip) is seen from
-    # r's points next to it at up to a half, and the 3x3 points may all be far from it: the
-    # strips of a 1 cm gap between a shelf and a wall got 0.006 of the wall for 0.5, -30%
-    touching = ~apart & el.splittable[r] & small
-    return np.where(use, bound, np.where(touching, TOUCHING_BOUND, 0.0))
+    out = np.empty(len(r))
+    near_bounds(el.quads, el.centroid, el.normal, el.area, el.splittable, np.asarray(r, np.int64),
+                np.asarray(s, np.int64), near_only, NEAR_SMALLER, NEAR_GAP, NEAR_RELATIVE, TOUCHING_BOUND, out)
+    return out
 
 
 def _visibility_doubt(visible: np.ndarray, partial: np.ndarray, samples: int) -> np.ndarray:
