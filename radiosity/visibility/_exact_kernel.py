@@ -1111,9 +1111,9 @@ def _next_occluder(stack, top, pos, end, lo, hi, olo, ohi, node_lo, node_hi, nod
 # whose box spans a terrain (a light above, a far ground triangle: thousands of triangles in the
 # box, a handful near the segments) or a cluttered room stops walking most of it. For the
 # hierarchy (hull_always) every undecided occluder is tested against the hull's faces whatever
-# the count (_hull_tested), so the walk and classify_listed agree. Until session 32 the hull came after 16
-# occluders and only those met after it were tested: the 300-cube furnace room's classification
-# of its cluster links' patch pairs took 10.8 s where it now takes 8 s.
+# the count (_hull_tested), so the walk and classify_listed agree. Until session 32 the hull
+# came after 16 occluders and only those met after it were tested: the 300-cube furnace room's
+# classification of its cluster links' patch pairs took 10.8 s where it now takes 8.2-8.7 s.
 HULL_AFTER = 2
 MAX_HULL_PLANES = 34  # both patches' planes and every (edge of one, vertex of the other)
 
@@ -1213,6 +1213,7 @@ def _classify_pair(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, nod
         met += 1
         if met == HULL_AFTER:
             n_planes = _hull_planes(vi, vj, planes, tol)
+            # the undecided occluders met before (at most HULL_AFTER - 1, all in out_occ)
             n_maybe = _outside_hull(out_occ, n_maybe, olo, ohi, planes, n_planes, pad)
             if _beyond_planes(olo[kk], ohi[kk], planes, n_planes, pad):
                 continue
