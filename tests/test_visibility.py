@@ -245,9 +245,9 @@ def _assert_tightens_the_box_reference(vis, quads, i, j, status, rows, occ, seed
 
 
 def test_walk_bounded_by_the_pair_hull_drops_only_occluders_no_segment_meets():
-    """Each pair's walk is bounded by the faces of its hull too (from its first undecided
-    occluder on): against the box-only reference the status and occluders only tighten, FULL
-    never changes, and no dense segment meets an occluder dropped."""
+    """Pairs whose box holds occluders walk the BVH within the faces of their hull too (after
+    HULL_AFTER occluders): against the box-only reference the status and occluders only
+    tighten, FULL never changes, and no dense segment meets an occluder dropped."""
     rng = np.random.default_rng(5)
     centres = rng.uniform(0, 1, (500, 3))
     u = rng.normal(size=(500, 3))

@@ -240,8 +240,6 @@ def rect_points(quads: np.ndarray, rects: np.ndarray, order: int, frames: np.nda
     return points, weights
 
 
-
-
 def _rect_points_loop(quads, rects, frames, nodes, w, points, weights):
     """Loop body of :func:`rect_points` (compiled by numba when available)."""
     order = nodes.shape[0]
