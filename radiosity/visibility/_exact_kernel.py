@@ -1535,7 +1535,8 @@ def classify_listed(va, ia, vb, ib, na, nb, cand_starts, cand_occ, polys, normal
     other's undecided occluders hold every occluder that can be undecided or full for them.
     Each candidate is tested as the walk tests what it reaches: its box against the pair's
     box (padded), behind either patch's plane (``behind`` >= 0; unit normals ``na``, ``nb``), then
-    :func:`_classify_one`. Returns (status, starts, occ) as :func:`classify_pairs` does.
+    :func:`_classify_one`; the undecided ones, as a walk's with ``hull_always``, against the
+    faces of the pair's hull (:func:`_hull_tested`). Returns (status, starts, occ) as :func:`classify_pairs` does.
     """
     m = ia.shape[0]
     status = np.zeros(m, np.int8)
@@ -1576,9 +1577,8 @@ def classify_listed(va, ia, vb, ib, na, nb, cand_starts, cand_occ, polys, normal
                 if state == 2:
                     found[first + n] = kk
                     n += 1
-            if n and not full and n_planes < 0:
-                n = _outside_hull(found[first:], n, olo, ohi, planes, _hull_planes(vi, vj, planes, tol), pad)
-            status[p] = 1 if full else (2 if n else 0)
+            status[p], n = _hull_tested(vi, vj, 1 if full else (2 if n else 0), n, n_planes, found[first:], olo,
+                                        ohi, planes, pad, tol, True)
             count[p] = 0 if full else n
     starts = np.zeros(m + 1, np.int64)
     for p in range(m):

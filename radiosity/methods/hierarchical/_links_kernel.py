@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from ...formfactors._quadrature import _distance
+
 
 @njit(cache=True)
 def gather_children(r, first, value, shares, x, y):
@@ -72,11 +74,6 @@ def near_bounds(quads, centroid, normal, area, splittable, r, s, near_only, near
             out[k] = touching_bound
         else:
             out[k] = 0.0
-
-
-@njit(cache=True, inline="always")
-def _distance(p, q):
-    return np.sqrt((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2 + (p[2] - q[2]) ** 2)
 
 
 @njit(cache=True, inline="always")
