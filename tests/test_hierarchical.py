@@ -157,6 +157,40 @@ def test_links_keep_their_undecided_occluders_across_passes_for_their_children()
         np.testing.assert_array_equal(a, b)
 
 
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 30), st.integers(0, 6), st.booleans(), st.booleans()), min_size=1, max_size=4),
+       st.integers(0, 2**32 - 1))
+def test_gathered_links_are_the_masked_parts_joined_with_their_occluder_lists(shapes, seed):
+    """``Links.gather`` (one copy by index, as a pass joins its kept links) gives what taking
+    each part by its mask and concatenating gives, occluder lists and their dtypes included,
+    for empty parts, empty masks, unmasked parts and parts whose lists mix int16 and int32."""
+    from radiosity.methods.hierarchical._hierarchy import Links, Undecided
+
+    rng = np.random.default_rng(seed)
+    parts = []
+    for n, most, masked, wide in shapes:
+        count = rng.integers(0, most + 1, n)
+        top = 40_000 if wide else 300
+        fields = [rng.integers(0, 99, n), rng.integers(0, 99, n)] + [rng.random(n) for _ in range(4)]
+        fields += [rng.random(n) < 0.5, rng.random(n) < 0.5, rng.integers(-127, 128, (n, 9)).astype(np.int8),
+                   rng.random(n).astype(np.float32)]
+        links = Links(*fields, occluders=Undecided(count, rng.integers(0, top, int(count.sum()))))
+        parts.append((links, rng.random(n) < 0.6 if masked else None))
+    got = Links.gather(parts)
+    names = [f for f in Links.__dataclass_fields__ if f != "occluders"]
+
+    def masked(links, m):
+        return Links(*(getattr(links, f)[m] for f in names), occluders=links.occluders.take(m))
+
+    want = Links.concat([p if m is None else masked(p, m) for p, m in parts])
+    for f in names:
+        np.testing.assert_array_equal(getattr(got, f), getattr(want, f), err_msg=f)
+        assert getattr(got, f).dtype == getattr(want, f).dtype, f
+    np.testing.assert_array_equal(got.occluders.count, want.occluders.count)
+    np.testing.assert_array_equal(got.occluders.occ, want.occluders.occ)
+    assert got.occluders.occ.dtype == want.occluders.occ.dtype
+
+
 def test_source_shares_are_each_childs_part_of_the_factor_from_the_receivers_centroid():
     """A link whose source has children gathers from each by Lambert's factor from the
     receiver's centroid to it over their sum; G holds the link's value and those four shares,

@@ -87,6 +87,8 @@ class Elements:
         self.centroid, self.area = centroids_and_areas(self.quads)
         self.normal = self._normals_of_roots[self.root]
         self.edge = longest_edge(self.quads)
+        # each element's bounding box, for the visibility's views (which asked for it per batch)
+        self.lo, self.hi = self.quads.min(axis=1), self.quads.max(axis=1)
 
     def __len__(self) -> int:
         return len(self.quads)

@@ -47,7 +47,7 @@ from ._clusters import CLUSTER_MIN_ROOTS, ClusterTree
 from ._clusters_kernel import collect_links, spread_links
 from ._elements import Elements
 from ._links import RECEIVER_ORDER, ElementVisibility, adaptive_factors, link_factors, source_shares
-from ._links_kernel import collect_children, gather_children, near_bounds
+from ._links_kernel import collect_children, gather_children, near_bounds, source_weights
 
 __all__ = ["Hierarchy", "LinkOperator", "Links", "HierarchyStats"]
 
@@ -170,13 +170,29 @@ class Links:
 
     def take(self, mask: np.ndarray) -> "Links":
         """The links where the boolean ``mask`` is set."""
-        return Links(*(getattr(self, f)[mask] for f in _LINK_ARRAYS), occluders=self.occluders.take(mask))
+        return Links.gather([(self, mask)])
 
     @staticmethod
     def concat(parts: list["Links"]) -> "Links":
         parts = [p for p in parts if len(p)] or [Links.empty()]
         return Links(*(np.concatenate([getattr(p, f) for p in parts]) for f in _LINK_ARRAYS),
                      occluders=Undecided.concat([p.occluders for p in parts]))
+
+    @staticmethod
+    def gather(parts: list[tuple["Links", np.ndarray | None]]) -> "Links":
+        """``concat`` of ``links.take(mask)`` over (links, mask) in ``parts`` (None: all of
+        them), copied once and by index: a pass joined its millions of kept links after
+        copying them out by mask, and the copies were 13% of a furnished room's solve."""
+        parts = [(p, m) for p, m in parts if len(p)]
+        if not parts:
+            return Links.empty()
+        rows = [None if m is None else np.flatnonzero(m) for _, m in parts]
+        fields = [_gathered([getattr(p, f) for p, _ in parts], rows) for f in _LINK_ARRAYS]
+        lists = [p.occluders for p, _ in parts]
+        counts = _gathered([u.count for u in lists], rows)
+        occ = _gathered([u.occ for u in lists],
+                        [None if m is None else np.flatnonzero(np.repeat(m, u.count)) for u, (_, m) in zip(lists, parts)])
+        return Links(*fields, occluders=Undecided(counts, occ))
 
 
 @dataclass
@@ -191,7 +207,7 @@ class Undecided:
         # the smallest type that holds them: the lists of a cluttered room's links run to tens
         # of millions of entries (the 2,120-face furnished room peaked at 3.24 GB without the
         # lists, 4.85 GB with them as int32, 4.09 GB as int16)
-        small = self.occ.size == 0 or self.occ.max() < np.iinfo(np.int16).max
+        small = self.occ.dtype == np.int16 or self.occ.size == 0 or self.occ.max() < np.iinfo(np.int16).max
         self.occ = self.occ.astype(np.int16 if small else np.int32, copy=False)
         self.count = self.count.astype(np.int32, copy=False)
 
@@ -221,6 +237,24 @@ class Undecided:
 
 
 _LINK_ARRAYS = tuple(f for f in Links.__dataclass_fields__ if f != "occluders")
+
+
+def _gathered(arrays: list[np.ndarray], rows: list[np.ndarray | None]) -> np.ndarray:
+    """The ``rows`` of each of ``arrays`` (None: all), joined into one new array. ``np.take``
+    into the output: a boolean mask cost twice as long, and six times on the (m, 9) codes."""
+    dtype = np.result_type(*(a.dtype for a in arrays))
+    sizes = [len(a) if at is None else len(at) for a, at in zip(arrays, rows)]
+    out = np.empty((sum(sizes),) + arrays[0].shape[1:], dtype)
+    start = 0
+    for a, at, n in zip(arrays, rows, sizes):
+        if at is None:
+            out[start:start + n] = a
+        elif a.dtype == dtype:
+            np.take(a, at, axis=0, out=out[start:start + n], mode="clip")  # "raise" copies through a buffer
+        else:
+            out[start:start + n] = a[at]
+        start += n
+    return out
 
 
 class LinkOperator(spla.LinearOperator):
@@ -482,8 +516,11 @@ class Hierarchy:
 
     def error(self, links: Links) -> np.ndarray:
         """(m,) error bound of each link, W/m^2 of the receiver (see the module notes)."""
-        weight = (self.rho[self.el.root[links.r]] * self.B[links.s]).max(axis=1)
-        return weight * (links.spread * links.visible + links.doubt)
+        return self._weights(links.r, links.s) * (links.spread * links.visible + links.doubt)
+
+    def _weights(self, r: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """(m,) the largest over channels of rho(r) B(s): what a link's bound is in units of."""
+        return source_weights(self.rho, self.el.root, self.B, r, s)
 
     def _over(self, links: Links) -> np.ndarray:
         """(m,) links to refine: their bound exceeds eps, or they are among a receiver's links
@@ -696,11 +733,13 @@ class Hierarchy:
             # in the first pass: left as they were, a wall's 0.25 m leaves kept the 16-ray
             # visibility of links carrying 2% of their light (the cube room, issue 14)
             stuck = over & ~split & ~self.links.settled
-            kept = [self.links.take(~split & ~stuck)]
+            # (links, mask) parts, taken when they are joined: the links that stay are most of
+            # them, and copying them out first cost a second copy
+            kept = [(self.links, ~split & ~stuck)]
             if SETTLE_LATER and stuck.any():
-                kept.append(self._settle(self.links.take(stuck)))
+                kept.append((self._settle(self.links.take(stuck)), None))
             else:
-                kept.append(self.links.take(stuck))
+                kept.append((self.links, stuck))
             work = self.links.take(split)
             n_first = int(split.sum())
             r, s, parent = self._expand(work)
@@ -709,7 +748,7 @@ class Hierarchy:
                 r, s, n_cluster_split = self._refine_clusters(self.cluster_r, self.cluster_s)
                 work = Links.concat([work, self._evaluate(r, s)])
         n_split = n_first + n_cluster_split + self._descend(work, kept)
-        links = Links.concat(kept)
+        links = Links.gather(kept)
         del kept, work  # their arrays are in links now
         if np.isfinite(self.leaf_eps):
             links, n_moved = self._move_varying_receivers(links)
@@ -723,21 +762,23 @@ class Hierarchy:
 
     def _descend(self, work: Links, kept: list) -> int:
         """Split the links of ``work`` over eps until every link meets it or is settled; the
-        links that stay go to ``kept``. Returns how many were split."""
+        links that stay go to ``kept`` (as (links, None) parts of :meth:`Links.gather`).
+        Returns how many were split."""
         n_split = 0
         while len(work):
             over = self._over(work)
             can = self.el.splittable
             split = over & (can[work.r] | can[work.s])
             stuck = over & ~split & ~work.settled
-            kept.append(work.take(~over | work.settled))
-            kept.append(self._settle(work.take(stuck)))
+            # taken now, not at the join: ``work`` is dropped at the next level
+            kept.append((work.take(~over | work.settled), None))
+            kept.append((self._settle(work.take(stuck)), None))
             n_split += int(split.sum())
             todo = work.take(split)
             if not len(todo):
                 break
             r, s, parent = self._expand(todo)
-            self._check_memory(len(r) + sum(len(k) for k in kept))
+            self._check_memory(len(r) + sum(len(p) for p, _ in kept if p is not self.links))
             work = self._evaluate(r, s, (todo, parent))
         return n_split
 
@@ -773,15 +814,15 @@ class Hierarchy:
             self._check_memory(len(r) + sum(int(a.sum()) for a in alive))
             new = []
             n_split += self._descend(self._evaluate(r, s, (todo, parent)), new)
-            parts.append(Links.concat(new))
+            parts.append(Links.gather(new))
             alive.append(np.ones(len(parts[-1]), bool))
             gained = np.zeros(len(self.el), bool)
             gained[parts[-1].r] = True
             chosen = [live & gained[part.r] for part, live in zip(parts, alive)]
-            tested = Links.concat([part.take(pick) for part, pick in zip(parts, chosen)])
+            tested = Links.gather(list(zip(parts, chosen)))
         if len(parts) == 1:
             return links, n_split
-        return Links.concat([part.take(live) for part, live in zip(parts, alive)]), n_split
+        return Links.gather(list(zip(parts, alive))), n_split
 
     def _varying_receivers(self, links: Links) -> np.ndarray:
         """(m,) links whose receiver can split and whose gathered radiosity, summed over its
@@ -803,7 +844,7 @@ class Hierarchy:
         if not len(idx):
             return np.zeros(len(links), bool)
         r, s = links.r[idx], links.s[idx]
-        weight = (self.rho[self.el.root[r]] * self.B[s]).max(axis=1) * links.shape_scale[idx] / 127
+        weight = self._weights(r, s) * links.shape_scale[idx] / 127
         # per element, not per distinct receiver: a bincount over all elements needs no sort of
         # the links (np.unique's; the box at draft, 3.5 mm: 0.150 -> 0.119 s a call)
         worst = np.zeros(len(self.el))

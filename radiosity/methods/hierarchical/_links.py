@@ -135,8 +135,7 @@ class ElementVisibility:
         view = copy.copy(self.patches)
         view.quads = el.quads
         view.normals = el.normal
-        view._lo = el.quads.min(axis=1)
-        view._hi = el.quads.max(axis=1)
+        view._lo, view._hi = el.lo, el.hi
         view.n_rays = 0
         view.n_exact_rows = 0
         # An occluder with no vertex in front of r's plane (or of s's) cannot cut a segment from

@@ -84,3 +84,17 @@ def _heights(quad, point, n):
         h = (quad[v, 0] - point[0]) * n[0] + (quad[v, 1] - point[1]) * n[1] + (quad[v, 2] - point[2]) * n[2]
         lo, hi = min(lo, h), max(hi, h)
     return lo, hi
+
+
+@njit(cache=True, parallel=True)
+def source_weights(rho, root, B, r, s):
+    """(m,) max over channels of rho[root[r[k]]] * B[s[k]]: the radiosity link k's error bound
+    scales with (the numpy expression's (m, channels) temporaries were 2% of a lit room's solve)."""
+    out = np.empty(len(r))
+    for k in prange(len(r)):
+        a, b = root[r[k]], s[k]
+        w = rho[a, 0] * B[b, 0]
+        for c in range(1, B.shape[1]):
+            w = max(w, rho[a, c] * B[b, c])
+        out[k] = w
+    return out
