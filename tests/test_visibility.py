@@ -396,6 +396,13 @@ def test_segment_rays_match_embree_and_the_numpy_reference():
     assert 0 < np.nanmean(seg) < 1 and not agree.all()
     np.testing.assert_allclose(seg, embree, atol=1e-12)  # jittered rays miss edges: no disagreement
     np.testing.assert_array_equal(seg_agree, agree)
+    # rows that read their pair's list through ``owner`` (no copy) get what the copied lists give
+    pick = np.random.default_rng(7).permutation(len(ii))[: len(ii) // 2]
+    starts, occ_lists = _occluder_lists(local[rows], occ, len(ii))
+    owned, owned_agree = vis._trace(xs[pick], wx[pick], vis.normals[ii[pick]], jj[pick], 3, key[pick],
+                                    (starts, occ_lists, pick))
+    np.testing.assert_array_equal(owned, seg[pick])
+    np.testing.assert_array_equal(owned_agree, seg_agree[pick])
 
 
 def stratified_points_reference(quads, samples, key, salt):

@@ -164,13 +164,14 @@ def ray_fractions(weight, traced, starts, blocked):
 
 @njit(cache=True, parallel=True)
 def segment_fractions(xs, wx, nx, quads, normals, j, samples, key, salt, floor_rel, offset, tfar, starts, occ,
-                      polys, onormal, ocenter, inward, tol):
+                      owner, polys, onormal, ocenter, inward, tol):
     """Weighted unblocked fraction per pair, each ray tested against the pair's own occluders.
 
     Same samples, weights and ray ends as :func:`shadow_rays`, but instead of a scene-wide ray
     cast each segment is intersected, in float64, with the convex occluder polygons
-    ``polys[occ[starts[p]:starts[p + 1]]]`` that the exact classification left undecided for
-    pair p (no other polygon can block any of its segments). A segment is blocked when it
+    ``polys[occ[starts[q]:starts[q + 1]]]``, q = ``owner[p]``, that the exact classification
+    left undecided for pair p (no other polygon can block any of its segments). ``owner`` lets
+    rows share a list (the points of one pair, a subset of pairs) without copying it. A segment is blocked when it
     crosses an occluder's plane strictly between its ends, before ``tfar`` of its length, at a
     point inside the polygon or within ``tol`` of it (so shared edges of neighbouring occluders
     leak nothing).
@@ -190,8 +191,8 @@ def segment_fractions(xs, wx, nx, quads, normals, j, samples, key, salt, floor_r
     n_blocks = (m + _BLOCK - 1) // _BLOCK
     for blk in prange(n_blocks):
         _segment_block(blk * _BLOCK, min(m, (blk + 1) * _BLOCK), xs, wx, nx, quads, normals, j, samples, key, salt,
-                       floor_rel, offset, tfar, starts, occ, polys, onormal, ocenter, inward, tol, frac, agree,
-                       n_traced)
+                       floor_rel, offset, tfar, starts, occ, owner, polys, onormal, ocenter, inward, tol, frac,
+                       agree, n_traced)
     return frac, agree, n_traced
 
 
@@ -201,7 +202,7 @@ _BLOCK = 64
 
 @njit(cache=True)
 def _segment_block(s, e, xs, wx, nx, quads, normals, j, samples, key, salt, floor_rel, offset, tfar, starts, occ,
-                   polys, onormal, ocenter, inward, tol, frac, agree, n_traced_out):
+                   owner, polys, onormal, ocenter, inward, tol, frac, agree, n_traced_out):
     """Pairs s..e-1 of :func:`segment_fractions`."""
     na = xs.shape[1]
     nb = samples * samples
@@ -212,7 +213,7 @@ def _segment_block(s, e, xs, wx, nx, quads, normals, j, samples, key, salt, floo
     xo = np.empty((na, 3))
     yo = np.empty((nb, 3))
     for p in range(s, e):
-        k0, k1 = starts[p], starts[p + 1]
+        k0, k1 = starts[owner[p]], starts[owner[p] + 1]
         nk = k1 - k0
         _stratified(quads[j[p]], samples, key[p], salt, ys, wy)
         ny = normals[j[p]]
