@@ -699,7 +699,8 @@ class Hierarchy:
 
     def _cluster_visibility(self, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(visible, partial) of cluster links: those of the pair of patches, one in each node,
-        that face each other most (:meth:`ClusterTree.facing_patch`)."""
+        that face each other most (:meth:`ClusterTree.facing_patch`), by rays alone
+        (:meth:`ElementVisibility.by_rays`): partly visible where they disagree."""
         if not (CLUSTER_VISIBILITY or CLUSTER_EPS_SHARE < 1.0) or not len(r):
             return np.ones(len(r)), np.zeros(len(r), bool)
         tree = self.tree
@@ -709,7 +710,7 @@ class Hierarchy:
         # gave the closed-room cull a (link, occluder) row per candidate of each: its 4.8 GB peak
         for start in range(0, len(r), CHUNK_LINKS):
             part = slice(start, start + CHUNK_LINKS)
-            visible[part], partial[part] = self.vis.fractions(self.el, a[part], b[part])
+            visible[part], partial[part] = self.vis.by_rays(self.el, a[part], b[part])
         return np.clip(visible, 0.0, 1.0), partial
 
     def refine(self) -> int:
