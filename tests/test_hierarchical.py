@@ -17,7 +17,7 @@ from radiosity.methods.hierarchical._elements import Elements, split_quads
 from radiosity.options import Options
 from radiosity.geometry import centroids_and_areas
 
-from helpers import axis_box, cube_room_scene, make_vis, rect, write_obj
+from helpers import all_pairs, axis_box, boxes_scene, cube_room_scene, make_vis, rect, write_obj
 
 REFERENCE = Path(__file__).parent / "data" / "cornell_uniform_default.json"
 
@@ -189,6 +189,40 @@ def test_gathered_links_are_the_masked_parts_joined_with_their_occluder_lists(sh
     np.testing.assert_array_equal(got.occluders.count, want.occluders.count)
     np.testing.assert_array_equal(got.occluders.occ, want.occluders.occ)
     assert got.occluders.occ.dtype == want.occluders.occ.dtype
+
+
+def test_rays_alone_give_the_classified_pairs_their_visibility_and_doubt():
+    """``ElementVisibility.by_rays`` (the cluster links' representative pairs: Embree rays,
+    no BVH walk) gives every pair the fraction its first samples**4 rays give against the
+    classification's own occluder lists, 1 and certain for pairs nothing can block, 0 and
+    partly visible for pairs an occluder hides whole, and "partly visible" to every undecided
+    pair whose rays disagree."""
+    from radiosity.methods.hierarchical._elements import Elements
+    from radiosity.methods.hierarchical._links import ElementVisibility
+    from radiosity.visibility._occluders import FREE, FULL, MAYBE
+    from radiosity.visibility._pairs import _rows_of
+
+    quads, groups = boxes_scene()
+    vis = make_vis(quads, groups, samples=2, max_samples=3)
+    el = Elements(quads, vis.normals, min_size=0.01)
+    i, j = all_pairs(len(quads))
+    ev = ElementVisibility(vis)
+    visible, partial = ev.by_rays(el, i, j)
+    view = ev._over(el)
+    status, rows, occ = view.classify(i, j)
+    seen = ~np.isnan(view._patch_rays(i, j, 2, i.astype(np.uint64) * np.uint64(len(el)) + j.astype(np.uint64), 1)[0])
+    free, full, maybe = (status == k for k in (FREE, FULL, MAYBE))
+    assert free.sum() > 50 and full.sum() > 5 and maybe.sum() > 50
+    np.testing.assert_array_equal(visible[free & seen], 1.0)
+    assert not partial[free & seen].any()
+    np.testing.assert_array_equal(visible[full & seen], 0.0)
+    assert partial[full & seen].all()
+    part = np.flatnonzero(maybe & seen)
+    sub_rows, sub_occ = _rows_of(rows, occ, part, len(i))
+    segments = view.ray_fraction(i[part], j[part], 2, 2, rows=sub_rows, occ=sub_occ)
+    np.testing.assert_allclose(visible[part], segments, atol=1e-12)
+    mixed = (segments > 0) & (segments < 1)
+    assert mixed.sum() > 20 and partial[part[mixed]].all()
 
 
 def test_source_shares_are_each_childs_part_of_the_factor_from_the_receivers_centroid():
