@@ -700,7 +700,8 @@ class Hierarchy:
     def _cluster_visibility(self, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(visible, partial) of cluster links: those of the pair of patches, one in each node,
         that face each other most (:meth:`ClusterTree.facing_patch`), by rays alone
-        (:meth:`ElementVisibility.by_rays`): partly visible where they disagree."""
+        (:meth:`ElementVisibility.by_rays`): partly visible where they disagree or all are
+        blocked."""
         if not (CLUSTER_VISIBILITY or CLUSTER_EPS_SHARE < 1.0) or not len(r):
             return np.ones(len(r)), np.zeros(len(r), bool)
         tree = self.tree

@@ -30,8 +30,8 @@ SETTLE_RAY_SAMPLES = 5  # the many-occluder pairs of ElementVisibility.exact tra
 CULL_BEHIND = True  # leave out occluders behind either end's plane (ElementVisibility._over)
 MAX_EXACT_OCCLUDERS = 10  # visibility.MAX_UNION: more possible occluders a pair trace rays (ElementVisibility.exact)
 # Undecided pairs whose first samples**4 rays would all agree (all blocked or all passing)
-# trace max_samples**4 rays, as those that disagree do: every undecided pair traces those. In the room of 300 floating cubes (draft) a fifth of the partly
-# visible links were unanimous, and their first rays counted as hidden what gaps between
+# trace max_samples**4 rays, as those that disagree do: every undecided pair traces those.
+# In the room of 300 floating cubes (draft) a fifth of the partly visible links were unanimous, and their first rays counted as hidden what gaps between
 # cubes let through (exact 0.044 where all 16 rays said 0) more than they counted as free
 # what small cubes hid (0.961 where all said 1): the links' power came out 0.6% short.
 RETRACE_UNANIMOUS = True
@@ -166,7 +166,7 @@ class ElementVisibility:
     def by_rays(self, el: Elements, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`fractions` by the first ``samples**4`` stratified rays alone, cast through
         Embree against every occluder with no classification; "partly visible" where they
-        disagree. Pairs whose rays carry no weight take :meth:`fractions`.
+        disagree or all are blocked. Pairs whose rays carry no weight take :meth:`fractions`.
 
         For the cluster links' representative pairs (:meth:`Hierarchy._cluster_visibility`),
         whose visibility is a guess for two whole clusters: their walks through the occluders'
