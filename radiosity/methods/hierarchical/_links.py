@@ -31,9 +31,10 @@ CULL_BEHIND = True  # leave out occluders behind either end's plane (ElementVisi
 MAX_EXACT_OCCLUDERS = 10  # visibility.MAX_UNION: more possible occluders a pair trace rays (ElementVisibility.exact)
 # Undecided pairs whose first samples**4 rays would all agree (all blocked or all passing)
 # trace max_samples**4 rays, as those that disagree do: every undecided pair traces those.
-# In the room of 300 floating cubes (draft) a fifth of the partly visible links were unanimous, and their first rays counted as hidden what gaps between
-# cubes let through (exact 0.044 where all 16 rays said 0) more than they counted as free
-# what small cubes hid (0.961 where all said 1): the links' power came out 0.6% short.
+# In the room of 300 floating cubes (draft) a fifth of the partly visible links were
+# unanimous, and their first rays counted as hidden what gaps between cubes let through
+# (exact 0.044 where all 16 rays said 0) more than they counted as free what small cubes hid
+# (0.961 where all said 1): the links' power came out 0.6% short.
 RETRACE_UNANIMOUS = True
 # Pairs whose rays all carry no weight take exact shadows once (not again after the retrace),
 # at 4x4 receiver points only: in the 100-cube room (draft) 34,455 such pairs, most of them
