@@ -1195,9 +1195,9 @@ def _classify_pair(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, nod
     occluders, its box lies beyond no face of the pair's hull (``planes``: scratch; from then on
     the walk leaves out boxes beyond them, and the undecided occluders met before are tested
     too). A walk that met fewer leaves that to :func:`_hull_tested` (``hull_always``). With
-    ``behind`` >= 0 an
-    occluder that lies behind the plane of either patch (unit normals ``nij[0]``, ``nij[1]``; see
-    :func:`_behind`) is free without a test: the faces of a cube that touch one of its faces.
+    ``behind`` >= 0 an occluder that lies behind the plane of either patch (unit normals
+    ``nij[0]``, ``nij[1]``; see :func:`_behind`) is free without a test: the faces of a cube that
+    touch one of its faces.
     """
     _pair_box(vi, vj, lo, hi)
     n_maybe = 0
@@ -1536,7 +1536,8 @@ def classify_listed(va, ia, vb, ib, na, nb, cand_starts, cand_occ, polys, normal
     Each candidate is tested as the walk tests what it reaches: its box against the pair's
     box (padded), behind either patch's plane (``behind`` >= 0; unit normals ``na``, ``nb``), then
     :func:`_classify_one`; the undecided ones, as a walk's with ``hull_always``, against the
-    faces of the pair's hull (:func:`_hull_tested`). Returns (status, starts, occ) as :func:`classify_pairs` does.
+    faces of the pair's hull (:func:`_hull_tested`). Returns (status, starts, occ) as
+    :func:`classify_pairs` does.
     """
     m = ia.shape[0]
     status = np.zeros(m, np.int8)

@@ -171,10 +171,10 @@ def segment_fractions(xs, wx, nx, quads, normals, j, samples, key, salt, floor_r
     cast each segment is intersected, in float64, with the convex occluder polygons
     ``polys[occ[starts[q]:starts[q + 1]]]``, q = ``owner[p]``, that the exact classification
     left undecided for pair p (no other polygon can block any of its segments). ``owner`` lets
-    rows share a list (the points of one pair, a subset of pairs) without copying it. A segment is blocked when it
-    crosses an occluder's plane strictly between its ends, before ``tfar`` of its length, at a
-    point inside the polygon or within ``tol`` of it (so shared edges of neighbouring occluders
-    leak nothing).
+    rows share a list (the points of one pair, a subset of pairs) without copying it. A segment
+    is blocked when it crosses an occluder's plane strictly between its ends, before ``tfar`` of
+    its length, at a point inside the polygon or within ``tol`` of it (so shared edges of
+    neighbouring occluders leak nothing).
 
     Returns
     -------

@@ -174,9 +174,8 @@ class Links:
 
     @staticmethod
     def concat(parts: list["Links"]) -> "Links":
-        parts = [p for p in parts if len(p)] or [Links.empty()]
-        return Links(*(np.concatenate([getattr(p, f) for p in parts]) for f in _LINK_ARRAYS),
-                     occluders=Undecided.concat([p.occluders for p in parts]))
+        """All links of ``parts``, in order, in new arrays."""
+        return Links.gather([(p, None) for p in parts])
 
     @staticmethod
     def gather(parts: list[tuple["Links", np.ndarray | None]]) -> "Links":
@@ -222,10 +221,6 @@ class Undecided:
     def only(self, mask: np.ndarray) -> "Undecided":
         """The same links, with the lists of those where ``mask`` is not set emptied."""
         return Undecided(np.where(mask, self.count, 0), self.occ[np.repeat(mask, self.count)])
-
-    @staticmethod
-    def concat(parts: list["Undecided"]) -> "Undecided":
-        return Undecided(np.concatenate([p.count for p in parts]), np.concatenate([p.occ for p in parts]))
 
     def of(self, parent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(starts, occluders), CSR over ``parent``: each entry's link's undecided occluders."""
