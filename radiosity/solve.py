@@ -327,11 +327,20 @@ def _balance(F, scene: Scene, radiosity: np.ndarray) -> dict[str, list[float]]:
 
 
 def _without(F: sp.csr_matrix, inactive: np.ndarray) -> sp.csr_matrix:
-    """F with the rows and columns of inactive patches (obstructions) set to zero."""
+    """F with the rows and columns of inactive patches (obstructions) set to zero.
+
+    The fill leaves such pairs out already (``assemble(active=...)``), so this is mostly a
+    check; two sparse products took 0.3 ms of a 7 ms fill of View3D's blocked plates."""
     if not inactive.any():
         return F
-    keep = sp.diags((~inactive).astype(float))
-    return (keep @ F @ keep).tocsr()
+    F = F.tocsr()
+    drop = np.repeat(inactive, np.diff(F.indptr)) | inactive[F.indices]
+    if not drop.any():
+        return F
+    F = F.copy()
+    F.data[drop] = 0.0
+    F.eliminate_zeros()
+    return F
 
 
 ENFORCE = ("none", "reciprocity", "closure", "auto")

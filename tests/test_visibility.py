@@ -290,6 +290,28 @@ def test_runs_of_pairs_classified_whole_match_pairs_one_by_one():
         assert {FREE, FULL, MAYBE} <= set(status.tolist())
 
 
+def test_runs_that_stay_undecided_are_given_up_with_the_same_results():
+    """The blocked plates cut 8 x 8 (a blocker between them casting shadows that straddle most
+    runs of one receiver): a block of pairs stops testing runs as a whole once most tests stay
+    undecided (``_exact_kernel._grouping_pays``), and every pair still gets what its own walk
+    gives, in the same order."""
+    h = 1.0 / 8
+    a, b = (g.ravel() * h for g in np.meshgrid(np.arange(8), np.arange(8), indexing="ij"))
+    square = np.stack([np.column_stack([a, b]), np.column_stack([a + h, b]), np.column_stack([a + h, b + h]),
+                       np.column_stack([a, b + h])], axis=1)
+    low = np.concatenate([square, np.zeros((64, 4, 1))], axis=2)
+    up = np.concatenate([square, np.ones((64, 4, 1))], axis=2)[:, ::-1]
+    blocker = np.array([[[0.25, 0.25, 0.5], [0.75, 0.25, 0.5], [0.75, 0.75, 0.5], [0.25, 0.75, 0.5]]])
+    quads = np.concatenate([low, up, blocker])
+    vis = make_vis(quads, np.arange(len(quads)))
+    i, j = np.repeat(np.arange(64), 64), np.tile(np.arange(64, 128), 64)  # runs of one receiver
+    status, rows, occ = vis._classify_pairs(quads, i, quads, j)
+    alone = vis._classify_pairs(quads, i, quads, j, runs=False)
+    for got, want in zip((status, rows, occ), alone):
+        np.testing.assert_array_equal(got, want)
+    assert np.bincount(status).tolist() == [1392, 1936, 768]  # free, full, maybe (bench_fill's counts)
+
+
 def test_culling_behind_either_plane_drops_exactly_the_occluders_behind():
     """``cull_behind`` (the hierarchy's elements) leaves out of the classification every occluder
     with no vertex in front of the receiver's plane or of the source's, and nothing else: a

@@ -138,14 +138,17 @@ def winding_labels(quads: np.ndarray, normals: np.ndarray, groups: np.ndarray, s
     groups = np.asarray(groups)
     n_groups = int(groups.max()) + 1 if len(groups) else 0
     column = np.full(n_groups, -1, np.int64)
-    pts = _sample_points(quads, normals, scale)
-    plo, phi = pts.min(axis=1), pts.max(axis=1)
     labels = []
     # an object of one patch has at most 2 triangles, too few to close (below): skipping those
     # first keeps scenes of single-patch objects (View3D models: one object per surface) from a
-    # Python pass over every object (0.2-0.3 s on the blocked plates of bench_fill)
+    # Python pass over every object (0.2-0.3 s on the blocked plates of bench_fill), and from
+    # the sample points when no object has two patches
     sizes = np.bincount(groups, minlength=n_groups) if len(groups) else np.zeros(0, np.int64)
-    for g in np.flatnonzero(sizes >= 2):
+    several = np.flatnonzero(sizes >= 2)
+    if len(several):
+        pts = _sample_points(quads, normals, scale)
+        plo, phi = pts.min(axis=1), pts.max(axis=1)
+    for g in several:
         mine = groups == g
         tris = _triangles(quads[mine])
         if len(tris) < 4:
