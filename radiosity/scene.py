@@ -291,7 +291,7 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
         notes.append(f"{data.path}: no face emits light (no material used has Ke > 0); "
                      "the solution is all zero")
     paths = _emitter_paths(data, vertices, faces, kept, emission,
-                           patches if uncut and max_patch_size is None else None)
+                           patches if uncut and max_patch_size is None else None, hidden_from=patches)
     notes += light_path_notes(paths, str(data.path))
     for note in notes:
         if MEASURED not in note:  # the package's own measured data is no surprise to warn about
@@ -314,10 +314,13 @@ def load_scene(path, *, max_patch_size: float | None = None, emission: str = "ra
 
 
 def _emitter_paths(data, vertices: np.ndarray, faces: list[np.ndarray], kept: np.ndarray, emission: str,
-                   coarse: Patches | None = None):
+                   coarse: Patches | None = None, hidden_from: Patches | None = None):
     """Where the emitters' light first lands (``_lightpaths``), traced on the faces as written
     (one patch per face, no imprint): the cost does not grow with ``max_patch_size``.
-    ``coarse``: those patches if the caller has them (faces uncut, no size limit)."""
+    ``coarse``: those patches if the caller has them (faces uncut, no size limit).
+    ``hidden_from``: the scene's patches; a face emits only from its part no contact hides (a
+    lamp's top flush with the ceiling sent its rays through the ceiling's plane: "48% escape"
+    from a closed room whose energy balance lost 0.2%)."""
     if coarse is None:
         coarse, report = subdivide_faces(vertices, faces, None)
         coarse, _ = _in_file_faces(coarse, report, kept)
@@ -325,6 +328,8 @@ def _emitter_paths(data, vertices: np.ndarray, faces: list[np.ndarray], kept: np
         return None
     ke = np.array([m.ke for m in data.materials] + [(0.0, 0.0, 0.0)], dtype=float).reshape(-1, 3)
     em = (np.pi if emission == "radiance" else 1.0) * ke[data.face_material[coarse.patch_face]]
+    if hidden_from is not None and hidden_from.patch_hidden.any():
+        em = em * _unhidden_share(hidden_from, len(data.faces))[coarse.patch_face, None]
     quads = coarse.quads
     # Rays start on emitting patches only (and on the last patch, where a draw rounded past the
     # power's total would land): areas and normals elsewhere are never read, and cost seconds
@@ -335,6 +340,19 @@ def _emitter_paths(data, vertices: np.ndarray, faces: list[np.ndarray], kept: np
     normals[rows] = polygon_normals(quads[rows])
     scale = float(np.linalg.norm(np.ptp(quads.reshape(-1, 3), axis=0)))
     return trace_emitters(quads, normals, em, area, data.face_object[coarse.patch_face], data.objects, scale)
+
+
+def _unhidden_share(patches: Patches, n_faces: int) -> np.ndarray:
+    """(n_faces,) share of each face's area that no contact hides (1 for faces with no hidden part)."""
+    share = np.ones(n_faces)
+    faces = np.unique(patches.patch_face[patches.patch_hidden])
+    rows = np.flatnonzero(np.isin(patches.patch_face, faces))
+    area = centroids_and_areas(patches.quads[rows])[1]
+    face = patches.patch_face[rows]
+    total = np.bincount(face, area, minlength=n_faces)[faces]
+    hidden = np.bincount(face, np.where(patches.patch_hidden[rows], area, 0.0), minlength=n_faces)[faces]
+    share[faces] = np.clip(1.0 - hidden / np.where(total > 0, total, 1.0), 0.0, 1.0)
+    return share
 
 
 def _crossing_notes(data, kept: np.ndarray, crossings: list[tuple[int, int]]) -> list[str]:

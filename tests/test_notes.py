@@ -97,6 +97,22 @@ def test_right_room_and_cornell_box_have_no_back_face_note(tmp_path):
     assert 0.1 < scene.light_paths["escaped"] < 0.3
 
 
+def test_a_lamp_box_flush_with_the_ceiling_sends_no_light_out_of_a_closed_room(tmp_path):
+    """A lamp modelled as a box, every face emitting, its top face on the ceiling: that face is
+    hidden by the contact and emits nothing into the room, so none of the emitters' rays may
+    escape the closed room (its rays used to cross the ceiling's plane: 48% "escaped")."""
+    from helpers import axis_box, write_obj
+
+    path = write_obj(tmp_path / "lamp.obj", {"room": axis_box((0, 0, 0), (4, 3, 2.5), inward=True),
+                                            "lamp": axis_box((1.6, 1.1, 2.48), (2.4, 1.9, 2.5), inward=False)},
+                     materials={"grey": ((0.5, 0.5, 0.5), (0, 0, 0)), "light": ((0.8, 0.8, 0.8), (10, 10, 10))},
+                     object_material={"room": "grey", "lamp": "light"})
+    scene = load(path)
+    assert scene.patch_hidden.any()  # the lamp's top and the ceiling under it
+    assert scene.light_paths["escaped"] == 0.0 and scene.light_paths["back"] == 0.0
+    assert not notes_with(scene, "escape")
+
+
 @pytest.mark.parametrize("variant", [dict(flip_room=True), dict(flip_room=True, flip_light=True),
                                      dict(flip_room=True, flip_light=True, light_in_ceiling=True, boxes=False)])
 def test_room_wound_inside_out_is_named(tmp_path, variant):
