@@ -423,6 +423,31 @@ def test_auto_takes_the_hierarchy_when_a_sample_says_the_fill_is_slow(monkeypatc
     assert "would take about" in note and "sampled pairs" in note and "partly occluded" in note
 
 
+def test_auto_times_the_fill_before_it_believes_a_slow_estimate(monkeypatch):
+    """A fill the pair model calls slow is timed on a random sample of its rows first
+    (``estimate.time_fill``): the small room's fill, whatever the model says, takes seconds,
+    so auto stays uniform. The rows' projection is unbiased: row r holds the pairs (r, j > r),
+    so the rows timed stand for all of them."""
+    import importlib
+
+    from radiosity.methods.uniform import estimate
+
+    solve_module = importlib.import_module("radiosity.solve")
+    scene = cube_room_scene(8)
+    knobs = dict(preset="draft", cache=False, link_tolerance=5e-2, min_element_rel=1 / 5)
+    monkeypatch.setattr(solve_module, "AUTO_SAMPLE_MIN", 10)
+    monkeypatch.setattr(estimate, "SECONDS_PER_PAIR", {"rays": 1.0, "exact": 1.0})  # the model: days
+    assert radiosity.solve(scene, **knobs).summary()["method"] == "uniform"
+    cut = radiosity.solve(scene, method="uniform", **knobs).scene
+    vis = make_vis(cut.patch_quads, cut.patch_object)
+    settings = solve_module._fill_settings(Options.from_preset("draft"))
+    active = ~cut.patch_inactive
+    timing = estimate.time_fill(cut.patch_quads, cut.patch_normal, cut.patch_centroid, cut.patch_area, vis, settings,
+                                active, share=1.0)
+    assert timing.rows == active.sum() - 1 and timing.share == pytest.approx(1 - 1 / active.sum())
+    assert 0 < timing.seconds < 600 and "random rows" in timing.describe()
+
+
 def test_fill_estimate_counts_the_facing_pairs_of_open_plates():
     """Two facing plates cut n x n, nothing between: half the ordered pairs face (plate to
     plate), none is partly occluded; the sample is seeded, so the estimate repeats."""
