@@ -443,7 +443,7 @@ def test_auto_times_the_fill_before_it_believes_a_slow_estimate(monkeypatch):
     settings = solve_module._fill_settings(Options.from_preset("draft"))
     active = ~cut.patch_inactive
     timing = estimate.time_fill(cut.patch_quads, cut.patch_normal, cut.patch_centroid, cut.patch_area, vis, settings,
-                                active, share=1.0)
+                                active, share=1.0, budget=np.inf)
     assert timing.rows == active.sum() - 1 and timing.share == pytest.approx(1 - 1 / active.sum())
     assert 0 < timing.seconds < 600 and "random rows" in timing.describe()
 
