@@ -114,9 +114,9 @@ def time_fill(quads: np.ndarray, normals: np.ndarray, centroid: np.ndarray, area
 
     Row r of the fill holds the pairs (r, j > r) (:func:`fill_block`), so each unordered pair
     lies in one row and rows drawn uniformly give an unbiased sample of the fill's work. The
-    rows are drawn (seeded) from the active ones until ``share`` of them or ``budget`` seconds;
-    one row first, untimed, builds what the fill builds once (the ray tracer's scene, the
-    closed objects' labels) and compiles the kernels that row uses. Unlike
+    rows are drawn (seeded) from the active ones until ``share`` of them or ``budget`` seconds.
+    What the fill builds once is built before the clock starts: the ray tracer's scene here,
+    and the closed objects' labels and the kernels it uses by one row filled untimed. Unlike
     :func:`estimate_fill` this depends on the machine and its load: near the threshold the
     choice it informs can differ between runs.
     """
