@@ -9,15 +9,17 @@ later subdivision never crosses one, and flags the regions that can never exchan
 
 Two kinds of contact are found between faces of *different* objects (``CONTACT_REL``):
 
-- **overlap**: a face lies in (or within the tolerance of) the receiver's plane and overlaps it
-  in projection: a light just under a ceiling, a picture on a wall, a block's bottom face on
-  the floor. The receiver's overlapped region is hidden when the other face lies in front of it
+- **overlap**: a face lies in (or within the tolerance of) the receiver's plane, parallel to it
+  (``CONTACT_TILT``), and overlaps it in projection: a light just under a ceiling, a picture on
+  a wall, a block's bottom face on the floor. The receiver's overlapped region is hidden when the other face lies in front of it
   (on its lit side). For exactly coplanar faces facing the same way the smaller face covers
   the larger one (a picture covers the wall); facing opposite ways, both are covered.
-- **footprint**: edges of an object's faces lie in the receiver's plane and close into loops:
-  the bottom edges of a block without a bottom face standing on the floor. The polygon the
-  loops enclose is cut out; it is hidden when the object's faces in front of the receiver that
-  turn their back to it (a block's top) cover it in projection. An open tube standing on the
+- **footprint**: edges of an object's faces lie in the receiver's plane (within the tolerance
+  and ``CONTACT_TILT``) and close into loops: the bottom edges of a block without a bottom face
+  standing on the floor. The polygon the loops enclose is cut out; it is hidden when the
+  object's faces in front of the receiver that turn their back to it (a block's top) cover it
+  in projection, and none of its faces turns to it from the plane at a tilt (the cap of a
+  tessellated sphere inside a ring of edges just above the floor). An open tube standing on the
   floor is cut but not hidden; open chains of edges (a single partition wall) are not cut.
 
 Pieces are built in each receiving face's plane with shapely (clipping) and mapbox_earcut
