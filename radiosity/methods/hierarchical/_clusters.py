@@ -26,7 +26,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from ._clusters_kernel import facing_patches, link_bounds, link_estimates, receiver_shares
+from ._clusters_kernel import (element_bounds, element_estimates, facing_patches, link_bounds, link_estimates,
+                               receiver_shares)
 
 __all__ = ["ClusterTree", "CLUSTER_MIN_ROOTS"]
 
@@ -71,7 +72,7 @@ class ClusterTree:
         Bounding sphere, total area, largest reflectance per channel.
     """
 
-    def __init__(self, patches, quads, normals, areas, reflectance):
+    def __init__(self, patches, quads, normals, areas, reflectance, groups=None):
         self.n_roots = len(quads)
         self.normals, self.areas = np.asarray(normals, float), np.asarray(areas, float)
         order = np.asarray(patches, np.int64).copy()
@@ -105,10 +106,13 @@ class ClusterTree:
             sizes = np.array(hi)[kids] - np.array(lo)[kids]
             frontier = kids[sizes > 1]
         self.order, self.lo, self.hi = order, np.array(lo), np.array(hi)
+        self.position = np.full(self.n_roots, -1, np.int64)  # of each patch in ``order``
+        self.position[order] = np.arange(len(order))
         self.child, self.level = np.array(child, np.int64).reshape(-1, 2), np.array(level)
         single = self.hi - self.lo == 1
         self.patch = np.where(single, order[np.minimum(self.lo, len(order) - 1)], -1)
         self._bounds(quads, np.asarray(reflectance, float))
+        self.group = self._groups(np.zeros(self.n_roots, np.int64) if groups is None else np.asarray(groups))
         internal = np.flatnonzero(~single)
         self.internal = internal  # the cluster nodes (two or more patches)
         self.column = np.full(len(self.lo), -1)
@@ -116,6 +120,17 @@ class ClusterTree:
 
     def __len__(self) -> int:
         return len(self.lo)
+
+    def _groups(self, groups: np.ndarray) -> np.ndarray:
+        """(k,) the group (object) of each node's patches where they share one, else -1."""
+        out = np.full(len(self.lo), -1, np.int64)
+        leaf = np.flatnonzero(self.patch >= 0)
+        out[leaf] = groups[self.patch[leaf]]
+        for depth in range(int(self.level.max()), -1, -1):
+            nodes = np.flatnonzero((self.level == depth) & (self.patch < 0))
+            a, b = out[self.child[nodes, 0]], out[self.child[nodes, 1]]
+            out[nodes] = np.where(a == b, a, -1)
+        return out
 
     def _bounds(self, quads: np.ndarray, rho: np.ndarray) -> None:
         """Spheres, areas and reflectance bounds, from the patches up (children follow parents)."""
@@ -189,8 +204,19 @@ class ClusterTree:
                     self.cone, self.area, self.rho, np.ascontiguousarray(B, dtype=float), out)
         return out
 
-    def refine(self, r: np.ndarray, s: np.ndarray, B: np.ndarray, eps: float):
+    def refine(self, r: np.ndarray, s: np.ndarray, B: np.ndarray, eps: float, to_elements: np.ndarray | None = None,
+               apart: float = 1.0, min_patches: int = 2):
         """Split node links over ``eps`` down to where they meet it or join two patches.
+
+        ``to_elements`` (optional, (n_roots,) bool): input patches that may gather from a
+        cluster as elements. A link over ``eps`` from a cluster to such a patch at least as
+        large as the cluster stops here, as a mixed link, for the patch's quadtree to split
+        (:meth:`Hierarchy._refine_mixed`): splitting the cluster instead took a wall patch
+        down to one link per triangle of a tessellated sphere beside it. Only where the gap
+        between the two spheres is at least ``apart`` times the patch's radius, and to clusters
+        of at least ``min_patches`` patches of one group (object) other than the patch's: the
+        estimate from one point of the element leans one way where a cluster wraps round it
+        (a floor patch and the walls beside it, one object, in the 100-cube furnace room).
 
         Returns
         -------
@@ -198,9 +224,11 @@ class ClusterTree:
             Cluster links meeting ``eps`` (at least one end a cluster).
         patch_r, patch_s : (p,) int
             Pairs of distinct input patches (to become element links).
+        mixed_r, mixed_s : (q,) int
+            Input patches (element indices) and the cluster nodes they gather from.
         n_split : int
         """
-        kept, pairs, n_split = [], [], 0
+        kept, pairs, mixed, n_split = [], [], [], 0
         is_patch = self.patch >= 0
         while len(r):
             both = is_patch[r] & is_patch[s]
@@ -209,6 +237,17 @@ class ClusterTree:
             over = (self.bound(r, s, B) > eps) | (r == s)
             kept.append((r[~over], s[~over]))
             r, s = r[over], s[over]
+            if to_elements is not None:
+                gap = np.linalg.norm(self.centre[r] - self.centre[s], axis=1) - self.radius[r] - self.radius[s]
+                stop = (is_patch[r] & (self.radius[r] >= self.radius[s]) & (gap >= apart * self.radius[r])
+                        & (self.hi[s] - self.lo[s] >= min_patches) & (self.group[s] >= 0))
+                at = np.flatnonzero(stop)
+                own = self.position[self.patch[r[at]]]
+                # not a cluster holding the patch itself: split on, down to its neighbours
+                stop[at] = (to_elements[self.patch[r[at]]] & ((own < self.lo[s[at]]) | (own >= self.hi[s[at]]))
+                            & (self.group[s[at]] != self.group[r[at]]))
+                mixed.append((self.patch[r[stop]], s[stop]))
+                r, s = r[~stop], s[~stop]
             n_split += len(r)
             same = r == s
             cr, cs = self.child[r[same]], self.child[s[same]]
@@ -221,7 +260,29 @@ class ClusterTree:
                 new_s += [s[split_r], self.child[s[~split_r], k]]
             r, s = np.concatenate(new_r), np.concatenate(new_s)
         cat = lambda parts, i: np.concatenate([p[i] for p in parts]) if parts else np.zeros(0, np.int64)  # noqa: E731
-        return cat(kept, 0), cat(kept, 1), cat(pairs, 0), cat(pairs, 1), n_split
+        return cat(kept, 0), cat(kept, 1), cat(pairs, 0), cat(pairs, 1), cat(mixed, 0), cat(mixed, 1), n_split
+
+    def element_bound(self, centroid: np.ndarray, extent: np.ndarray, normal: np.ndarray, rho: np.ndarray,
+                      s: np.ndarray, B: np.ndarray) -> np.ndarray:
+        """(m,) :meth:`bound` of flat elements (centroid, circumradius ``extent``, normal,
+        reflectance, per link) gathering from nodes s."""
+        out = np.empty(len(s))
+        element_bounds(np.ascontiguousarray(centroid, dtype=float), np.ascontiguousarray(extent, dtype=float),
+                       np.ascontiguousarray(normal, dtype=float), np.ascontiguousarray(rho, dtype=float),
+                       np.asarray(s, np.int64), self.centre, self.radius, self.axis, self.cone, self.area,
+                       np.ascontiguousarray(B, dtype=float), out)
+        return out
+
+    def element_estimates(self, centroid: np.ndarray, normal: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """(m,) isotropic factor from each element (its centroid and normal) to node s, per unit
+        of its area: ``sum_b P_b(-u) max(0, n . u) / (pi d^2)`` over the nodes b
+        ``ESTIMATE_DEPTH`` levels below s, as :meth:`estimates` takes a flat receiver."""
+        out = np.empty(len(s))
+        child, patch, lo, hi, order, normals, areas, centre, axis, cone = self._kernel_tree()
+        element_estimates(np.ascontiguousarray(centroid, dtype=float), np.ascontiguousarray(normal, dtype=float),
+                          np.asarray(s, np.int64), ESTIMATE_DEPTH, child, patch, lo, hi, order, normals, areas,
+                          centre, axis, cone, self.area_vector, out)
+        return out
 
     def estimates(self, r: np.ndarray, s: np.ndarray) -> np.ndarray:
         """(m,) isotropic factor of each cluster link: H_r = F_rs B_s per unit area of r.

@@ -30,27 +30,50 @@ def link_bounds(r, s, centre, radius, axis, cone, area, rho, B, out):
     orientation bound ``sin^2 w`` (see ClusterTree.bound)."""
     for k in prange(len(r)):
         i, j = r[k], s[k]
-        w0, w1, w2 = centre[j, 0] - centre[i, 0], centre[j, 1] - centre[i, 1], centre[j, 2] - centre[i, 2]
-        dist = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-        gap = dist - radius[i] - radius[j]
-        apart = gap > 0.0
-        if dist > 0.0:
-            w0, w1, w2 = w0 / dist, w1 / dist, w2 / dist
-        factor = 1.0
-        if apart:
-            spread = math.asin(min(1.0, max(0.0, (radius[i] + radius[j]) / dist)))
-            tilt_r = _angle(axis[i, 0], axis[i, 1], axis[i, 2], w0, w1, w2)
-            tilt_s = _angle(axis[j, 0], axis[j, 1], axis[j, 2], -w0, -w1, -w2)
-            cos_r = math.cos(min(_HALF_PI, max(0.0, tilt_r - cone[i] - spread)))
-            cos_s = math.cos(min(_HALF_PI, max(0.0, tilt_s - cone[j] - spread)))
-            factor = min(1.0, area[j] * cos_r * cos_s / (math.pi * gap * gap))
-        w = _angle(axis[i, 0], axis[i, 1], axis[i, 2], axis[j, 0], axis[j, 1], axis[j, 2]) + cone[i] + cone[j]
-        if w < _HALF_PI:
-            factor = min(factor, math.sin(w) ** 2)
+        factor = _factor_bound(centre[i], radius[i], axis[i], cone[i], centre[j], radius[j], axis[j], cone[j],
+                               area[j])
         power = 0.0
         for c in range(rho.shape[1]):
             power = max(power, rho[i, c] * B[j, c])
         out[k] = power * factor
+
+
+@njit(cache=True, parallel=True)
+def element_bounds(centroid, extent, normal, rho_r, s, centre, radius, axis, cone, area, B, out):
+    """out[k] = :func:`link_bounds`' bound of a flat element gathering from node s[k]: a node
+    with centre ``centroid[k]``, radius ``extent[k]``, axis ``normal[k]``, no cone and
+    reflectance ``rho_r[k]``."""
+    for k in prange(len(s)):
+        j = s[k]
+        factor = _factor_bound(centroid[k], extent[k], normal[k], 0.0, centre[j], radius[j], axis[j], cone[j],
+                               area[j])
+        power = 0.0
+        for c in range(rho_r.shape[1]):
+            power = max(power, rho_r[k, c] * B[j, c])
+        out[k] = power * factor
+
+
+@njit(cache=True, inline="always")
+def _factor_bound(ci, ri, ai, cone_i, cj, rj, aj, cone_j, area_j):
+    """The factor part of :func:`link_bounds` for receiver sphere (ci, ri, normal cone ai,
+    cone_i) and source (cj, rj, aj, cone_j) of area ``area_j``."""
+    w0, w1, w2 = cj[0] - ci[0], cj[1] - ci[1], cj[2] - ci[2]
+    dist = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    gap = dist - ri - rj
+    if dist > 0.0:
+        w0, w1, w2 = w0 / dist, w1 / dist, w2 / dist
+    factor = 1.0
+    if gap > 0.0:
+        spread = math.asin(min(1.0, max(0.0, (ri + rj) / dist)))
+        tilt_r = _angle(ai[0], ai[1], ai[2], w0, w1, w2)
+        tilt_s = _angle(aj[0], aj[1], aj[2], -w0, -w1, -w2)
+        cos_r = math.cos(min(_HALF_PI, max(0.0, tilt_r - cone_i - spread)))
+        cos_s = math.cos(min(_HALF_PI, max(0.0, tilt_s - cone_j - spread)))
+        factor = min(1.0, area_j * cos_r * cos_s / (math.pi * gap * gap))
+    w = _angle(ai[0], ai[1], ai[2], aj[0], aj[1], aj[2]) + cone_i + cone_j
+    if w < _HALF_PI:
+        factor = min(factor, math.sin(w) ** 2)
+    return factor
 
 
 @njit(cache=True, parallel=True)
@@ -137,6 +160,31 @@ def link_estimates(r, s, depth, child, patch, lo, hi, order, normals, areas, cen
                          / (math.pi * d2))
                 total += area[a] * min(power / max(area[a], 1e-300), 1.0)
         out[k] = min(total / max(area[r[k]], 1e-300), 1.0)
+
+
+@njit(cache=True, parallel=True)
+def element_estimates(centroid, normal, s, depth, child, patch, lo, hi, order, normals, areas, centre, axis, cone,
+                      area_vector, out):
+    """out[k] = isotropic factor from the point ``centroid[k]`` (facing ``normal[k]``) to node
+    s[k]: ``sum_b P_b(-u) max(0, n . u) / (pi d^2)`` over the nodes b ``depth`` levels below s[k]
+    (``u``, ``d``: from the point to b's centre), at most 1 (see ClusterTree.element_estimates)."""
+    for k in prange(len(s)):
+        ends = np.empty(2 ** depth, np.int64)
+        n_s = _below(s[k], depth, child, patch, ends)
+        total = 0.0
+        for j in range(n_s):
+            b = ends[j]
+            u0, u1, u2 = centre[b, 0] - centroid[k, 0], centre[b, 1] - centroid[k, 1], centre[b, 2] - centroid[k, 2]
+            d2 = u0 * u0 + u1 * u1 + u2 * u2
+            if d2 <= 0.0:
+                continue
+            d = math.sqrt(d2)
+            u0, u1, u2 = u0 / d, u1 / d, u2 / d
+            cos = normal[k, 0] * u0 + normal[k, 1] * u1 + normal[k, 2] * u2
+            if cos > 0.0:
+                total += cos * _projected(b, -u0, -u1, -u2, lo, hi, order, normals, areas, axis, cone,
+                                          area_vector) / (math.pi * d2)
+        out[k] = min(total, 1.0)
 
 
 @njit(cache=True, parallel=True)
