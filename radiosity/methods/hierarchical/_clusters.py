@@ -106,8 +106,6 @@ class ClusterTree:
             sizes = np.array(hi)[kids] - np.array(lo)[kids]
             frontier = kids[sizes > 1]
         self.order, self.lo, self.hi = order, np.array(lo), np.array(hi)
-        self.position = np.full(self.n_roots, -1, np.int64)  # of each patch in ``order``
-        self.position[order] = np.arange(len(order))
         self.child, self.level = np.array(child, np.int64).reshape(-1, 2), np.array(level)
         single = self.hi - self.lo == 1
         self.patch = np.where(single, order[np.minimum(self.lo, len(order) - 1)], -1)
@@ -205,16 +203,15 @@ class ClusterTree:
         return out
 
     def refine(self, r: np.ndarray, s: np.ndarray, B: np.ndarray, eps: float, to_elements: np.ndarray | None = None,
-               apart: float = 1.0, min_patches: int = 2):
+               min_patches: int = 2):
         """Split node links over ``eps`` down to where they meet it or join two patches.
 
         ``to_elements`` (optional, (n_roots,) bool): input patches that may gather from a
         cluster as elements. A link over ``eps`` from a cluster to such a patch at least as
         large as the cluster stops here, as a mixed link, for the patch's quadtree to split
         (:meth:`Hierarchy._refine_mixed`): splitting the cluster instead took a wall patch
-        down to one link per triangle of a tessellated sphere beside it. Only where the gap
-        between the two spheres is at least ``apart`` times the patch's radius, and to clusters
-        of at least ``min_patches`` patches of one group (object) other than the patch's: the
+        down to one link per triangle of a tessellated sphere beside it. Only to clusters of
+        at least ``min_patches`` patches of one group (object) other than the patch's: the
         estimate from one point of the element leans one way where a cluster wraps round it
         (a floor patch and the walls beside it, one object, in the 100-cube furnace room).
 
@@ -238,14 +235,10 @@ class ClusterTree:
             kept.append((r[~over], s[~over]))
             r, s = r[over], s[over]
             if to_elements is not None:
-                gap = np.linalg.norm(self.centre[r] - self.centre[s], axis=1) - self.radius[r] - self.radius[s]
-                stop = (is_patch[r] & (self.radius[r] >= self.radius[s]) & (gap >= apart * self.radius[r])
-                        & (self.hi[s] - self.lo[s] >= min_patches) & (self.group[s] >= 0))
-                at = np.flatnonzero(stop)
-                own = self.position[self.patch[r[at]]]
-                # not a cluster holding the patch itself: split on, down to its neighbours
-                stop[at] = (to_elements[self.patch[r[at]]] & ((own < self.lo[s[at]]) | (own >= self.hi[s[at]]))
-                            & (self.group[s[at]] != self.group[r[at]]))
+                # (a cluster of the patch's own object, which may hold the patch itself, splits on)
+                stop = (is_patch[r] & (self.radius[r] >= self.radius[s]) & (self.hi[s] - self.lo[s] >= min_patches)
+                        & (self.group[s] >= 0) & (self.group[s] != self.group[r]))
+                stop[stop] = to_elements[self.patch[r[stop]]]
                 mixed.append((self.patch[r[stop]], s[stop]))
                 r, s = r[~stop], s[~stop]
             n_split += len(r)

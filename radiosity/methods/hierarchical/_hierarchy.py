@@ -140,13 +140,12 @@ RECEIVER_VISIBILITY = True
 # cluster (Sillion 1995): a room with a 5,120-triangle sphere on its floor had 2.1 M element
 # links from room elements to single triangles at draft (Hierarchy._refine_mixed).
 MIXED_LINKS = True
-# ... only where the gap between the element's and the cluster's spheres is at least this many
-# times the larger radius (nearer, the cluster is split): in the 100-cube furnace room, floor
-# leaves at the walls' feet took +2.3% from the estimates of clusters of wall patches beside them.
-MIXED_GAP = -np.inf
-# ... and only to clusters of at least this many patches: below, a link to each patch costs
-# little, and the 100-cube furnace room's worst leaf went from 1.2% to 2.3% with mixed links to
-# its clusters of a few cubes' and walls' patches (the floor leaves at the walls' feet).
+# ... only to clusters of at least this many patches, all of one object other than the
+# element's (ClusterTree.refine): below, a link to each patch costs little, and with mixed links
+# to any cluster the 100-cube furnace room's floor leaves at the walls' feet went from 1.2% to
+# 2.3% off (the estimates of clusters of wall patches wrapping round them all lean one way).
+# Requiring the two spheres to lie apart instead kept the room right but lost the sphere rooms'
+# gain: their links are near ones.
 MIXED_MIN_PATCHES = 32
 
 
@@ -687,7 +686,7 @@ class Hierarchy:
         over = (tree.bound(r, s, B) > self.eps) | (r == s)
         factor = self.cluster_factor[~over] if len(self.cluster_factor) == len(r) else np.zeros(0)
         to_elements = (self.el.splittable[:tree.n_roots] & self.active[:tree.n_roots]) if MIXED_LINKS else None
-        cr, cs, pr, ps, mr, ms, n_split = tree.refine(r[over], s[over], B, self.eps, to_elements, MIXED_GAP,
+        cr, cs, pr, ps, mr, ms, n_split = tree.refine(r[over], s[over], B, self.eps, to_elements,
                                                       MIXED_MIN_PATCHES)
         visible, partial = self._cluster_visibility(cr, cs)
         if CLUSTER_EPS_SHARE < 1.0 and len(cr):
@@ -697,7 +696,7 @@ class Hierarchy:
             if tight.any():
                 tr, ts, tpr, tps, tmr, tms, t_split = tree.refine(cr[tight], cs[tight], B,
                                                                   CLUSTER_EPS_SHARE * self.eps, to_elements,
-                                                                  MIXED_GAP, MIXED_MIN_PATCHES)
+                                                                  MIXED_MIN_PATCHES)
                 t_visible, _ = self._cluster_visibility(tr, ts)
                 cr, cs = np.concatenate([cr[~tight], tr]), np.concatenate([cs[~tight], ts])
                 visible = np.concatenate([visible[~tight], t_visible])
@@ -718,9 +717,9 @@ class Hierarchy:
         """Refine the mixed links (element r gathers from cluster node s): the kept ones and the
         new pairs (r, s) the cluster refinement stopped at, under the node radiosities ``B``.
 
-        A link over eps splits its element when that can split, is at least as large as the
-        cluster (by bounding spheres) and lies ``MIXED_GAP`` apart from it, else the cluster; a
-        cluster's patch children become element links. Kept links take the isotropic estimate from the element's centroid
+        A link over eps splits its element when that can split and is at least as large as the
+        cluster (by bounding spheres), else the cluster; a cluster's patch children become
+        element links. Kept links take the isotropic estimate from the element's centroid
         (:meth:`ClusterTree.element_estimates`) times the visibility of the element and the
         cluster's patch that faces it most; partly visible ones meet ``CLUSTER_EPS_SHARE`` of
         eps, as cluster links do.
@@ -774,9 +773,7 @@ class Hierarchy:
             r, s = r[over], s[over]
             n_split += len(r)
             extent = np.linalg.norm(el.quads[r] - el.centroid[r][:, None], axis=2).max(axis=1)
-            gap = np.linalg.norm(el.centroid[r] - tree.centre[s], axis=1) - extent - tree.radius[s]
-            near = gap < MIXED_GAP * np.maximum(extent, tree.radius[s])
-            split_r = el.splittable[r] & (extent >= tree.radius[s]) & ~near
+            split_r = el.splittable[r] & (extent >= tree.radius[s])
             first = self._split_elements(r[split_r])
             new_r, new_s = [(first[:, None] + four).ravel()], [np.repeat(s[split_r], 4)]
             rr, ss = r[~split_r], s[~split_r]
