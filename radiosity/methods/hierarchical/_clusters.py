@@ -266,14 +266,15 @@ class ClusterTree:
                        np.ascontiguousarray(B, dtype=float), out)
         return out
 
-    def element_estimates(self, centroid: np.ndarray, normal: np.ndarray, s: np.ndarray) -> np.ndarray:
+    def element_estimates(self, centroid: np.ndarray, normal: np.ndarray, s: np.ndarray,
+                          depth: int = ESTIMATE_DEPTH) -> np.ndarray:
         """(m,) isotropic factor from each element (its centroid and normal) to node s, per unit
-        of its area: ``sum_b P_b(-u) max(0, n . u) / (pi d^2)`` over the nodes b
-        ``ESTIMATE_DEPTH`` levels below s, as :meth:`estimates` takes a flat receiver."""
+        of its area: ``sum_b P_b(-u) max(0, n . u) / (pi d^2)`` over the nodes b ``depth``
+        levels below s, as :meth:`estimates` takes a flat receiver."""
         out = np.empty(len(s))
         child, patch, lo, hi, order, normals, areas, centre, axis, cone = self._kernel_tree()
         element_estimates(np.ascontiguousarray(centroid, dtype=float), np.ascontiguousarray(normal, dtype=float),
-                          np.asarray(s, np.int64), ESTIMATE_DEPTH, child, patch, lo, hi, order, normals, areas,
+                          np.asarray(s, np.int64), depth, child, patch, lo, hi, order, normals, areas,
                           centre, axis, cone, self.area_vector, out)
         return out
 
