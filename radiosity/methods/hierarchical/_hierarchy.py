@@ -726,8 +726,7 @@ class Hierarchy:
         cluster's patch that faces it most; partly visible ones meet ``CLUSTER_EPS_SHARE`` of
         eps, as cluster links do. An element whose mixed links together vary across it past
         ``leaf_eps`` at one of its points hands them to its children, as element links do
-        (:meth:`_varying_receivers`): without that, wall leaves 0.6 m from a 1,280-triangle
-        sphere alternated +-1% in a furnace room (0.5% with a link to each triangle).
+        (:meth:`_varying_receivers`; the two sums are apart).
 
         Returns the element pairs (r, patch) to evaluate and how many links were split.
         """
