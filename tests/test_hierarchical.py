@@ -885,3 +885,29 @@ def test_a_tessellated_sphere_gathers_through_mixed_links(tmp_path, monkeypatch)
     monkeypatch.setattr(_hierarchy, "MIXED_LINKS", False)
     single = solve_h(scene)
     assert mixed.summary()["hierarchy"]["links"] < 0.6 * single.summary()["hierarchy"]["links"]
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.floats(4.0, 40.0), st.floats(-1.0, 1.0), st.floats(-1.0, 1.0), st.floats(0.0, 1.2))
+def test_element_estimates_of_a_far_cluster_are_lamberts_factors(height, dx, dy, tilt):
+    """A mixed link's estimate from a point to a flat cluster (8 x 8 squares of 0.1 m) a few to
+    tens of its sizes away matches the sum of the exact point-to-square factors within 2%
+    (the isotropic estimate is exact for a point source; the cluster's nodes two levels down
+    are 0.2 m across), and the bound is above both."""
+    from radiosity.formfactors import point_to_polygons
+    from radiosity.methods.hierarchical._clusters import ClusterTree
+
+    squares = np.array([rect(0.1 * i, 0.1 * i + 0.1, 0.1 * j, 0.1 * j + 0.1, 0.0) for i in range(8) for j in range(8)])
+    normals = np.tile([0.0, 0.0, 1.0], (64, 1))
+    areas = np.full(64, 0.01)
+    tree = ClusterTree(np.arange(64), squares, normals, areas, np.full((64, 3), 0.5))
+    point = np.array([[0.4 + dx * height, 0.4 + dy * height, height]])
+    toward = np.array([0.4, 0.4, 0.0]) - point[0]
+    normal = toward / np.linalg.norm(toward)
+    normal = normal + tilt * np.cross(normal, [1.0, 0.0, 0.0])  # up to about 50 degrees off the cluster
+    normal = (normal / np.linalg.norm(normal))[None]
+    exact = point_to_polygons(point, normal, squares).sum()
+    estimate = tree.element_estimates(point, normal, np.array([0]))[0]
+    assert estimate == pytest.approx(exact, rel=0.02, abs=1e-9)
+    bound = tree.element_bound(point, np.zeros(1), normal, np.full((1, 3), 1.0), np.array([0]), np.ones((len(tree), 3)))
+    assert bound[0] >= max(exact, estimate) * (1 - 1e-9)
