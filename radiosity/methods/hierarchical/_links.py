@@ -41,6 +41,9 @@ RETRACE_UNANIMOUS = True
 # cluster links' proxy pairs, took 3.8 of the 29.5 s, 3.4 s of it the 16x16 second try, which
 # found a point seeing the source for 4 of 54,284 pairs (the rest count as unblocked).
 BLIND_ORDERS = (4,)
+# Blind pairs (rays all without weight) behind more possible occluders than this take no exact
+# shadows in the refinement (ElementVisibility.fractions_undecided): visible 0.5, whole factor in doubt.
+MAX_BLIND_OCCLUDERS = 64
 
 
 def link_factors(el: Elements, r: np.ndarray, s: np.ndarray, order: int = RECEIVER_ORDER, *, shape: bool = False
@@ -192,7 +195,8 @@ class ElementVisibility:
         return visible, partial
 
     def fractions_undecided(self, el: Elements, r: np.ndarray, s: np.ndarray, *, children: bool = False,
-                            candidates: tuple[np.ndarray, np.ndarray] | None = None
+                            candidates: tuple[np.ndarray, np.ndarray] | None = None,
+                            split_if_partial: np.ndarray | None = None
                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`fractions`, and the undecided occluders of each pair (what its children may
         be classified against).
@@ -215,6 +219,10 @@ class ElementVisibility:
             Undecided occluders of each pair (0 unless partly visible).
         occluders : (count.sum(),) int
             Those occluders, pair after pair.
+        split_if_partial : (m,) bool, optional
+            Pairs that the caller splits if they are partly visible, whatever the fraction:
+            those the classification leaves undecided are only marked partly visible (visible
+            0.5), without rays or exact shadows.
         """
         m = len(r)
         visible = np.ones(m)
@@ -229,16 +237,27 @@ class ElementVisibility:
         self.n_classified += m
         visible[status == FULL] = -1.0
         part = np.flatnonzero(status == MAYBE)
+        if split_if_partial is not None and len(part):
+            doomed = part[split_if_partial[part]]
+            visible[doomed], partial[doomed] = 0.5, True
+            part = part[~split_if_partial[part]]
         if len(part):
-            local = np.full(m, -1)
-            local[part] = np.arange(len(part))
             # every undecided pair ends with max_samples**4 rays: those whose first rays agree
             # are traced again with them (RETRACE_UNANIMOUS), the others refined with them, so
             # they are traced once, with no first round (a sixth of the rays)
             n = max(view.samples, view.max_samples) if RETRACE_UNANIMOUS else None
-            visible[part] = view.ray_fraction(r[part], s[part], n, n, rows=local[rows], occ=occ, blind=False)
+            sub_rows, sub_occ = _rows_of(rows, occ, part, m)
+            visible[part] = view.ray_fraction(r[part], s[part], n, n, rows=sub_rows, occ=sub_occ, blind=False)
             partial[part] = True
             blind = part[np.isnan(visible[part])]
+            if len(blind):
+                # behind many possible occluders a blind pair is only marked uncertain (its whole
+                # factor stays in doubt: refinement splits it where that matters): their exact
+                # shadows unite hundreds of triangles at a point with shapely, 62% of the first
+                # pass in a room of tessellated primitives (29,536 faces)
+                many = np.bincount(rows, minlength=m)[blind] > MAX_BLIND_OCCLUDERS
+                visible[blind[many]] = 0.5
+                blind = blind[~many]
             if len(blind):
                 visible[blind] = view.blind_fraction(r[blind], s[blind], *_rows_of(rows, occ, blind, m),
                                                      orders=BLIND_ORDERS)
