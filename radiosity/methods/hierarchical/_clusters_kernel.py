@@ -135,6 +135,18 @@ def _below(node, depth, child, patch, out):
     return n
 
 
+@njit(cache=True, inline="always")
+def _direction(p, q):
+    """(u0, u1, u2, d^2): the unit vector from point p to point q and their squared distance
+    (u zero where they coincide)."""
+    u0, u1, u2 = q[0] - p[0], q[1] - p[1], q[2] - p[2]
+    d2 = u0 * u0 + u1 * u1 + u2 * u2
+    if d2 <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    d = math.sqrt(d2)
+    return u0 / d, u1 / d, u2 / d, d2
+
+
 @njit(cache=True, parallel=True)
 def link_estimates(r, s, depth, child, patch, lo, hi, order, normals, areas, centre, axis, cone, area,
                    area_vector, out):
@@ -149,12 +161,9 @@ def link_estimates(r, s, depth, child, patch, lo, hi, order, normals, areas, cen
             a = ends_r[i]
             for j in range(n_s):
                 b = ends_s[j]
-                u0, u1, u2 = centre[b, 0] - centre[a, 0], centre[b, 1] - centre[a, 1], centre[b, 2] - centre[a, 2]
-                d2 = u0 * u0 + u1 * u1 + u2 * u2
+                u0, u1, u2, d2 = _direction(centre[a], centre[b])
                 if d2 <= 0.0:
                     continue
-                d = math.sqrt(d2)
-                u0, u1, u2 = u0 / d, u1 / d, u2 / d
                 power = (_projected(a, u0, u1, u2, lo, hi, order, normals, areas, axis, cone, area_vector)
                          * _projected(b, -u0, -u1, -u2, lo, hi, order, normals, areas, axis, cone, area_vector)
                          / (math.pi * d2))
@@ -174,12 +183,9 @@ def element_estimates(centroid, normal, s, depth, child, patch, lo, hi, order, n
         total = 0.0
         for j in range(n_s):
             b = ends[j]
-            u0, u1, u2 = centre[b, 0] - centroid[k, 0], centre[b, 1] - centroid[k, 1], centre[b, 2] - centroid[k, 2]
-            d2 = u0 * u0 + u1 * u1 + u2 * u2
+            u0, u1, u2, d2 = _direction(centroid[k], centre[b])
             if d2 <= 0.0:
                 continue
-            d = math.sqrt(d2)
-            u0, u1, u2 = u0 / d, u1 / d, u2 / d
             cos = normal[k, 0] * u0 + normal[k, 1] * u1 + normal[k, 2] * u2
             if cos > 0.0:
                 total += cos * _projected(b, -u0, -u1, -u2, lo, hi, order, normals, areas, axis, cone,
