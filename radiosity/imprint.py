@@ -11,9 +11,10 @@ Two kinds of contact are found between faces of *different* objects (``CONTACT_R
 
 - **overlap**: a face lies in (or within the tolerance of) the receiver's plane, parallel to it
   (``CONTACT_TILT``), and overlaps it in projection: a light just under a ceiling, a picture on
-  a wall, a block's bottom face on the floor. The receiver's overlapped region is hidden when the other face lies in front of it
-  (on its lit side). For exactly coplanar faces facing the same way the smaller face covers
-  the larger one (a picture covers the wall); facing opposite ways, both are covered.
+  a wall, a block's bottom face on the floor. The receiver's overlapped region is hidden when
+  the other face lies in front of it (on its lit side). For exactly coplanar faces facing the
+  same way the smaller face covers the larger one (a picture covers the wall); facing opposite
+  ways, both are covered.
 - **footprint**: edges of an object's faces lie in the receiver's plane (within the tolerance
   and ``CONTACT_TILT``) and close into loops: the bottom edges of a block without a bottom face
   standing on the floor. The polygon the loops enclose is cut out; it is hidden when the
