@@ -688,3 +688,37 @@ def test_squares_in_chunks_of_pairs_give_the_same_bits(monkeypatch):
     chunked = vis.adaptive_hidden(*args, penumbra_depth=2, max_depth=3)
     assert len(args[0]) > 50 and whole.max() > 0
     assert whole.tobytes() == chunked.tobytes()
+
+
+@pytest.mark.parametrize("threshold", [0, 20])
+def test_pairs_with_long_occluder_lists_trace_through_embree_with_the_same_fractions(monkeypatch, threshold):
+    """Two plates cut 6 x 6 with a 320-triangle icosphere between them: up to 37 undecided
+    occluders a pair. Tracing the pairs with more than ``threshold`` of them through Embree
+    (``RAY_LIST_EMBREE``) gives the fractions of the compiled loop over each pair's list, and
+    a segment that crosses the sphere is blocked either way."""
+    import trimesh
+
+    from radiosity.visibility import Visibility, _pairs
+
+    n = 6
+    edges = np.linspace(0.0, 2.0, n + 1)
+    plates = [rect(edges[a], edges[a + 1], edges[b], edges[b + 1], z, down=down)
+              for z, down in ((0.0, False), (2.0, True)) for a in range(n) for b in range(n)]
+    sphere = trimesh.creation.icosphere(subdivisions=2, radius=0.5)
+    sphere.apply_translation([1.0, 1.0, 1.0])
+    tris = sphere.vertices[sphere.faces]
+    quads = np.concatenate([np.array(plates), np.concatenate([tris, tris[:, 2:3]], axis=1)])
+    normals = np.cross(quads[:, 1] - quads[:, 0], quads[:, 2] - quads[:, 0])
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    groups = np.r_[np.zeros(2 * n * n, int), np.ones(len(tris), int)]
+    i, j = (g.ravel() for g in np.meshgrid(np.arange(n * n), np.arange(n * n, 2 * n * n), indexing="ij"))
+    vis = Visibility(quads, normals, groups, 3.0, samples=2, max_samples=4)
+    status, rows, occ = vis.classify(i, j)
+    assert np.bincount(rows, minlength=len(i)).max() > 20 >= threshold
+    looped = vis.ray_fraction(i, j, 4, 4, rows=rows, occ=occ)
+    monkeypatch.setattr(_pairs, "RAY_LIST_EMBREE", threshold)
+    traced = vis.ray_fraction(i, j, 4, 4, rows=rows, occ=occ)
+    np.testing.assert_allclose(traced, looped, atol=1e-12)
+    middle = [a * n + b for a in (2, 3) for b in (2, 3)]  # under the sphere
+    centre = np.isin(i, middle) & (j == i + n * n)  # straight up through it
+    assert centre.sum() == 4 and np.all(traced[centre] < 0.5)

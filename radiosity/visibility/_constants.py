@@ -6,6 +6,12 @@ from __future__ import annotations
 # the end's offset off the source surface (``_tol.RAY_OFFSET_REL``).
 RAY_TFAR_SHORT = 1e-4
 
+# Pairs with more undecided occluders than this trace their rays through Embree, not the
+# compiled loop over their list (Visibility._trace). Measured on two plates 8 x 8 with an
+# icosphere between them (4,096 pairs, 256 rays each): 14 occluders a pair, 0.07 s by loop
+# against 0.13 s by Embree; 38, 0.22 against 0.21; 242, 0.69 against 0.17; 842, 2.5 against 0.28.
+RAY_LIST_EMBREE = 64
+
 # Distance from an occluder's plane, relative to the scene size, within which a patch vertex
 # counts as lying in that plane (touching or coplanar). float64 geometry, so far above rounding.
 PLANE_REL = 1e-9
