@@ -691,12 +691,12 @@ class Hierarchy:
         links.settled = np.ones(len(links), bool)
         return links.take((links.factor > 0) & (links.visible > 0))
 
-    def _check_memory(self, extra_links: int) -> None:
+    def _check_memory(self, extra_links: int, extra_bytes: int = 0) -> None:
         links = len(self.links) + len(self.cluster_r) + len(self.mixed_r) + extra_links
         # the kept links' occluder lists, and their copy when the pass's links are joined
         estimate = ((len(self.links) + extra_links) * LINK_PEAK_BYTES + 2 * self.links.occluders.occ.nbytes
                     + (len(self.cluster_r) + len(self.mixed_r)) * CLUSTER_LINK_PEAK_BYTES
-                    + len(self.el) * ELEMENT_PEAK_BYTES)
+                    + len(self.el) * ELEMENT_PEAK_BYTES + extra_bytes)
         _memory.check(f"a hierarchy of {links:,} links and {len(self.el):,} elements", int(estimate),
                       "raise link_tolerance or min_element_size (or use a coarser preset)")
 
@@ -963,7 +963,10 @@ class Hierarchy:
             if not len(todo):
                 break
             r, s, parent = self._expand(todo)
-            self._check_memory(len(r) + sum(len(p) for p, _ in kept if p is not self.links))
+            # with the occluder lists the pass has kept so far (a room of tessellated primitives
+            # outgrew the estimate by its lists and was killed at 24 GB)
+            new = [p for p, _ in kept if p is not self.links]
+            self._check_memory(len(r) + sum(len(p) for p in new), sum(p.occluders.occ.nbytes for p in new))
             work = self._evaluate(r, s, (todo, parent))
         return n_split
 
@@ -996,7 +999,8 @@ class Hierarchy:
                     start += len(at)
             n_split += len(todo)
             r, s, parent = self._expand(todo, receiver=True)
-            self._check_memory(len(r) + sum(int(a.sum()) for a in alive))
+            self._check_memory(len(r) + sum(int(a.sum()) for a in alive),
+                               sum(part.occluders.occ.nbytes for part in parts[1:]))
             new = []
             n_split += self._descend(self._evaluate(r, s, (todo, parent)), new)
             parts.append(Links.gather(new))
