@@ -636,9 +636,8 @@ class Hierarchy:
         """(m,) new links that :meth:`_descend` splits if they are partly visible, whatever
         their visible fraction: one end can split, and the whole factor, the doubt a partly
         visible link keeps (``UNANIMOUS_DOUBT``), is over eps at the current radiosities. Their
-        rays and exact shadows would be thrown away with them: in a room of tessellated
-        primitives (29,536 faces) 62% of the first pass went to the exact shadows of root pairs
-        (a 3 m floor piece and a 1.2 m cylinder strip) that all split."""
+        rays and exact shadows would be thrown away with them. (In a first pass only the
+        emitters' links qualify: the others' sources have no radiosity yet.)"""
         if not SKIP_DOOMED or UNANIMOUS_DOUBT < 1.0:
             return None
         can = self.el.splittable
@@ -753,8 +752,7 @@ class Hierarchy:
 
         Returns the element pairs (r, patch) to evaluate and how many links were split.
         """
-        old = len(self.mixed_r)
-        if old:
+        if len(self.mixed_r):
             still = self._mixed_bound(self.mixed_r, self.mixed_s, B) <= self.eps
             r, s = np.concatenate([self.mixed_r[~still], r]), np.concatenate([self.mixed_s[~still], s])
             kept = [(self.mixed_r[still], self.mixed_s[still], self.mixed_factor[still], self.mixed_shape[still])]
@@ -825,11 +823,16 @@ class Hierarchy:
             np.maximum(worst, np.abs(np.bincount(r, weights=weight * shape[:, k], minlength=len(self.el))), out=worst)
         return can & (worst > self.leaf_eps)[r]
 
-    def _mixed_bound(self, r: np.ndarray, s: np.ndarray, B: np.ndarray) -> np.ndarray:
-        """(m,) :meth:`ClusterTree.bound` of mixed links (element r gathers from node s)."""
+    def _mixed_bound(self, r: np.ndarray, s: np.ndarray, B: np.ndarray, extent: np.ndarray | None = None) -> np.ndarray:
+        """(m,) :meth:`ClusterTree.bound` of mixed links (element r gathers from node s);
+        ``extent``: r's :meth:`_extent`, if known."""
         el = self.el
-        extent = np.linalg.norm(el.quads[r] - el.centroid[r][:, None], axis=2).max(axis=1)
+        extent = self._extent(r) if extent is None else extent
         return self.tree.element_bound(el.centroid[r], extent, el.normal[r], self.rho[el.root[r]], s, B)
+
+    def _extent(self, r: np.ndarray) -> np.ndarray:
+        """(m,) radius of each element's sphere about its centroid."""
+        return np.linalg.norm(self.el.quads[r] - self.el.centroid[r][:, None], axis=2).max(axis=1)
 
     def _split_mixed(self, r: np.ndarray, s: np.ndarray, B: np.ndarray, eps: float):
         """Split mixed links over ``eps`` until each meets it or becomes element links.
@@ -841,11 +844,11 @@ class Hierarchy:
         kept, pairs, n_split = [], [], 0
         four = np.arange(4)
         while len(r):
-            over = self._mixed_bound(r, s, B) > eps
+            extent = self._extent(r)
+            over = self._mixed_bound(r, s, B, extent) > eps
             kept.append((r[~over], s[~over]))
-            r, s = r[over], s[over]
+            r, s, extent = r[over], s[over], extent[over]
             n_split += len(r)
-            extent = np.linalg.norm(el.quads[r] - el.centroid[r][:, None], axis=2).max(axis=1)
             split_r = el.splittable[r] & (extent >= tree.radius[s])
             first = self._split_elements(r[split_r])
             new_r, new_s = [(first[:, None] + four).ravel()], [np.repeat(s[split_r], 4)]
@@ -865,12 +868,7 @@ class Hierarchy:
         that faces its centroid most, as :meth:`_cluster_visibility` does for two clusters."""
         if not (CLUSTER_VISIBILITY or CLUSTER_EPS_SHARE < 1.0) or not len(r):
             return np.ones(len(r)), np.zeros(len(r), bool)
-        b = self.tree.facing_patch(s, self.el.centroid[r])
-        visible, partial = np.empty(len(r)), np.empty(len(r), bool)
-        for start in range(0, len(r), CHUNK_LINKS):
-            part = slice(start, start + CHUNK_LINKS)
-            visible[part], partial[part] = self.vis.by_rays(self.el, r[part], b[part])
-        return np.clip(visible, 0.0, 1.0), partial
+        return self._rays_between(r, self.tree.facing_patch(s, self.el.centroid[r]))
 
     def _split_elements(self, which: np.ndarray) -> np.ndarray:
         """:meth:`Elements.split`, the new children starting with their parent's radiosity."""
@@ -888,11 +886,15 @@ class Hierarchy:
         if not (CLUSTER_VISIBILITY or CLUSTER_EPS_SHARE < 1.0) or not len(r):
             return np.ones(len(r)), np.zeros(len(r), bool)
         tree = self.tree
-        a, b = tree.facing_patch(r, tree.centre[s]), tree.facing_patch(s, tree.centre[r])
-        visible, partial = np.empty(len(r)), np.empty(len(r), bool)
-        # in chunks, as element links are: the 5 M cluster links of the 1,000-cube room at once
-        # gave the closed-room cull a (link, occluder) row per candidate of each: its 4.8 GB peak
-        for start in range(0, len(r), CHUNK_LINKS):
+        return self._rays_between(tree.facing_patch(r, tree.centre[s]), tree.facing_patch(s, tree.centre[r]))
+
+    def _rays_between(self, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(visible, partial) of the element pairs (a, b) by rays alone
+        (:meth:`ElementVisibility.by_rays`), in chunks as element links are: the 5 M cluster
+        links of the 1,000-cube room at once gave the closed-room cull a (link, occluder) row
+        per candidate of each, its 4.8 GB peak."""
+        visible, partial = np.empty(len(a)), np.empty(len(a), bool)
+        for start in range(0, len(a), CHUNK_LINKS):
             part = slice(start, start + CHUNK_LINKS)
             visible[part], partial[part] = self.vis.by_rays(self.el, a[part], b[part])
         return np.clip(visible, 0.0, 1.0), partial
