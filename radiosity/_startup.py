@@ -31,14 +31,39 @@ class Terminated(KeyboardInterrupt):
 # must still end as interrupted, not with "internal error".
 _received: list[int] = []
 
+# How many blocks of the command are ready to turn the exception a signal raises into its clean
+# exit (guard_imports' imports, cli.entry). Between them (runpy finishing the package's import
+# and starting ``radiosity.__main__``, say) nothing would catch it: the handler exits itself.
+_catchers = 0
+
+
+@contextlib.contextmanager
+def catching_signals():
+    """Mark a block that catches KeyboardInterrupt and ends the command cleanly itself."""
+    global _catchers
+    _catchers += 1
+    try:
+        yield
+    finally:
+        _catchers -= 1
+
+
+def _exit_uncaught(signum: int) -> None:
+    """Outside every catching block nothing has been written yet: one line and the status."""
+    if _catchers == 0:
+        print(INTERRUPTED_LINE, file=sys.stderr)
+        os._exit(EXIT_TERMINATED if signum == signal.SIGTERM else EXIT_INTERRUPTED)
+
 
 def _raise_terminated(signum, frame):
     _received.append(signum)
+    _exit_uncaught(signum)
     raise Terminated()
 
 
 def _raise_interrupted(signum, frame):
     _received.append(signum)
+    _exit_uncaught(signum)
     raise KeyboardInterrupt()
 
 
@@ -182,9 +207,10 @@ def guard_imports():
         if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not ignored by the caller
             signal.signal(signal.SIGINT, _raise_interrupted)
     try:
-        if command:  # inside the try: it imports numba, seconds in which a Ctrl-C may come
-            hold_signals_while_compiling()
-        yield
+        with catching_signals():
+            if command:  # inside the try: it imports numba, seconds in which a Ctrl-C may come
+                hold_signals_while_compiling()
+            yield
     except KeyboardInterrupt as exc:
         if not command:
             raise

@@ -52,7 +52,9 @@ def test_signals_at_random_moments_end_cleanly(tmp_path):
     expected = json.loads((reference / "summary.json").read_text())["objects"]
 
     rng = np.random.default_rng(20261201)
-    moments = np.sort(rng.uniform(0.0, 1.1 * duration, 4))
+    # Not before 0.2 s: the interpreter's own start-up, before the package's first line runs,
+    # answers a signal with Python's traceback, and nothing in the package can change that.
+    moments = np.sort(rng.uniform(0.2, 1.1 * duration, 4))
     signals = [signal.SIGINT, signal.SIGTERM, signal.SIGINT, signal.SIGTERM]
     outcomes = []
     for k, (moment, sig) in enumerate(zip(moments, signals)):
@@ -74,6 +76,33 @@ def test_signals_at_random_moments_end_cleanly(tmp_path):
         for name, value in expected.items():
             np.testing.assert_allclose(again[name], value, rtol=1e-12)
     assert any(code != 0 for code in outcomes), outcomes  # the draw did interrupt something
+
+
+GAP_PROBE = """
+import os, signal, sys
+import radiosity._startup as startup
+signal.signal(signal.SIGINT, startup._raise_interrupted)  # as the command sets them
+signal.signal(signal.SIGTERM, startup._raise_terminated)
+with startup.catching_signals():
+    try:
+        os.kill(os.getpid(), signal.SIGINT)
+    except KeyboardInterrupt:
+        print("caught inside")
+os.kill(os.getpid(), getattr(signal, sys.argv[1]))  # between the command's blocks: runpy, say
+print("went on")
+"""
+
+
+@pytest.mark.parametrize("name, status", [("SIGINT", 130), ("SIGTERM", 143)])
+def test_a_signal_between_the_commands_blocks_exits_cleanly(name, status):
+    """A Ctrl-C after the package's imports and before ``radiosity.__main__`` ran printed
+    runpy's KeyboardInterrupt traceback (test_signals_at_random_moments_end_cleanly, once):
+    outside every block that catches it, the handler ends the command itself."""
+    result = subprocess.run([sys.executable, "-c", GAP_PROBE, name], capture_output=True, text=True,
+                            timeout=60)
+    assert result.returncode == status, result.stderr
+    assert result.stdout.split("\n")[0] == "caught inside" and "went on" not in result.stdout
+    assert result.stderr.strip() == INTERRUPTED_LINE
 
 
 HELD_PROBE = """

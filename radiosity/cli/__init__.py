@@ -19,7 +19,7 @@ import sys
 import warnings
 
 from .._errors import MemoryBudgetError, RadiosityError, RadiosityWarning
-from .._startup import INTERRUPTED_LINE, PROG, exit_status, guard_imports, signal_received
+from .._startup import INTERRUPTED_LINE, PROG, catching_signals, exit_status, guard_imports, signal_received
 
 with guard_imports():
     from . import _cache, _exchange, _solve, _view, _viewfactors
@@ -161,16 +161,17 @@ def entry() -> None:
     the cache are handled in ``finally`` blocks inside ``main``), so the process flushes its
     streams and leaves at once with the status ``main`` chose.
     """
-    try:
-        code = main()
-    except KeyboardInterrupt as exc:  # between main's own handlers, e.g. while printing the summary
-        code = _interrupted(exc)
-    try:
-        sys.stdout.flush()
-        sys.stderr.flush()
-    except (KeyboardInterrupt, OSError):  # a closed pipe, or a second Ctrl-C
-        pass
-    os._exit(code)
+    with catching_signals():  # never left: the process ends inside
+        try:
+            code = main()
+        except KeyboardInterrupt as exc:  # between main's own handlers, e.g. while printing the summary
+            code = _interrupted(exc)
+        try:
+            sys.stdout.flush()
+            sys.stderr.flush()
+        except (KeyboardInterrupt, OSError):  # a closed pipe, or a second Ctrl-C
+            pass
+        os._exit(code)
 
 
 def _report_warnings(caught, *, show_notes: bool) -> None:
