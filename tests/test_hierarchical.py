@@ -928,3 +928,35 @@ def test_links_about_to_split_skip_their_rays_with_the_same_result(monkeypatch):
     np.testing.assert_array_equal(skipped.radiosity, traced.radiosity)
     assert skipped.summary()["hierarchy"]["links"] == traced.summary()["hierarchy"]["links"]
     assert skipped.summary()["hierarchy"]["pairs_traced"] < traced.summary()["hierarchy"]["pairs_traced"]
+
+
+def test_inherited_candidates_are_classified_in_bounded_runs(monkeypatch):
+    """Children of partly visible links are classified against their parents' lists in runs of
+    at most CHUNK_CANDIDATES entries (100,000 children behind thousands of triangles each
+    outgrew the machine at once): runs of 50 give an 8-cube room bit for bit. The lists the
+    children keep are counted against the budget as they grow, not at the next level only."""
+    from radiosity import _memory
+    from radiosity.methods.hierarchical import _hierarchy
+
+    scene = cube_room_scene(8)
+    whole = solve_h(scene)
+    monkeypatch.setattr(_hierarchy, "CHUNK_CANDIDATES", 50)
+    seen, grown = [], [0]
+    check_memory, check = _hierarchy.Hierarchy._check_memory, _memory.check
+
+    def recording(self, extra_links, extra_bytes=0, grown_bytes=0):
+        grown[0] = grown_bytes
+        return check_memory(self, extra_links, extra_bytes, grown_bytes)
+
+    monkeypatch.setattr(_hierarchy.Hierarchy, "_check_memory", recording)
+    monkeypatch.setattr(_memory, "check", lambda what, estimate, knob, **kw: (
+        seen.append((grown[0], estimate)), check(what, estimate, knob, **kw))[1])
+    runs = solve_h(scene)
+    np.testing.assert_array_equal(whole.radiosity, runs.radiosity)
+    assert whole.summary()["hierarchy"]["links"] == runs.summary()["hierarchy"]["links"]
+    before = max(estimate for g, estimate in seen if g == 0)
+    while_growing = max(estimate for g, estimate in seen if g > 0)
+    assert while_growing > before  # the growth is what a budget between the two refuses
+    monkeypatch.setenv(_memory.ENV_BUDGET, str((before + while_growing) // 2))
+    with pytest.raises(radiosity.MemoryBudgetError, match="links"):
+        solve_h(scene)

@@ -85,6 +85,11 @@ ELEMENT_PEAK_BYTES = 4096
 # 0.71% for 13% more time (such a link is a value and four shares in G, class _Children).
 SOURCE_SHARES = True
 CHUNK_LINKS = 100_000  # links evaluated at once (bounds the temporaries of their visibility)
+# Inherited candidates classified at once, and the bytes each takes meanwhile: the index into
+# the parent's list and the int64 copy (Undecided.of), the kernel's found list and its output,
+# the output's pair of each row (ElementVisibility.fractions_undecided), 8 bytes each, and 2 more
+CHUNK_CANDIDATES = 8_000_000
+CANDIDATE_BYTES = 42
 # Cluster links scale their isotropic estimate by the visibility of one representative pair of
 # patches (since 2026-12-05 the two facing each other most, ClusterTree.facing_patch; the middle
 # patches in tree order, until then, were often turned away from each other and so "free": the
@@ -499,6 +504,7 @@ class Hierarchy:
         self.links = Links.empty()
         self.stats = HierarchyStats(roots=len(quads), min_element_size=float(min_size), eps=float(self.eps))
         self._started = False
+        self._planned = (0, 0)  # what the last memory check counted beyond self.links
         self.progress = lambda n: None  # called with the number of links evaluated (a progress bar)
         n_active = int(self.active.sum())
         if clusters is None:
@@ -603,6 +609,8 @@ class Hierarchy:
             parts.append(Links(rr[keep], ss[keep], factor[keep], spread[keep], np.clip(visible[keep], 0, 1),
                                doubt[keep], partial[keep], np.zeros(n, bool), codes, scale,
                                occluders=undecided.take(keep)))
+            if parents is not None:  # twice: Links.concat copies them
+                self._check_memory(*self._planned, grown_bytes=2 * sum(p.occluders.occ.nbytes for p in parts))
         return Links.concat(parts)
 
     def _visible_deviation(self, r: np.ndarray, s: np.ndarray, factor: np.ndarray, deviation: np.ndarray,
@@ -654,12 +662,31 @@ class Hierarchy:
         links, parent = parents
         m = len(r)
         visible, partial, count = np.ones(m), np.zeros(m, bool), np.zeros(m, np.int64)
-        ask = links.partial[parent]
-        candidates = links.occluders.of(parent[ask]) if INHERIT_OCCLUDERS else None
-        visible[ask], partial[ask], count[ask], occ = self.vis.fractions_undecided(
-            self.el, r[ask], s[ask], children=True, candidates=candidates,
-            split_if_partial=None if split_if_partial is None else split_if_partial[ask])
-        return visible, partial, count, occ
+        lists = []
+        for ask in self._candidate_batches(links, parent):
+            candidates = links.occluders.of(parent[ask]) if INHERIT_OCCLUDERS else None
+            visible[ask], partial[ask], count[ask], occ = self.vis.fractions_undecided(
+                self.el, r[ask], s[ask], children=True, candidates=candidates,
+                split_if_partial=None if split_if_partial is None else split_if_partial[ask])
+            lists.append(occ.astype(np.int32))  # kept: 4 bytes, not the kernel's 8
+            del candidates, occ
+        return visible, partial, count, np.concatenate(lists) if lists else np.zeros(0, np.int32)
+
+    def _candidate_batches(self, links: Links, parent: np.ndarray) -> list[np.ndarray]:
+        """The children of partly visible links (``parent``: each child's parent in ``links``),
+        in runs of at most ``CHUNK_CANDIDATES`` inherited candidates (at least one child a run).
+
+        Each candidate entry costs about ``CANDIDATE_BYTES`` while its child is classified; in a
+        room of tessellated primitives (29,536 faces), 100,000 children of links behind
+        thousands of undecided triangles each asked for more than the machine has, and the
+        kernel's OOM killer ended the solve at 24 GB.
+        """
+        ask = np.flatnonzero(links.partial[parent])
+        if not INHERIT_OCCLUDERS or not len(ask):
+            return [ask] if len(ask) else []
+        ends = np.cumsum(links.occluders.count[parent[ask]].astype(np.int64))
+        cuts = np.searchsorted(ends, np.arange(CHUNK_CANDIDATES, ends[-1], CHUNK_CANDIDATES), side="right")
+        return [part for part in np.split(ask, np.unique(np.maximum(cuts, 1))) if len(part)]
 
     def _expand(self, links: Links, receiver: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The child links replacing ``links`` (the larger end, if it can split, is split four
@@ -690,12 +717,23 @@ class Hierarchy:
         links.settled = np.ones(len(links), bool)
         return links.take((links.factor > 0) & (links.visible > 0))
 
-    def _check_memory(self, extra_links: int, extra_bytes: int = 0) -> None:
+    def _check_memory(self, extra_links: int, extra_bytes: int = 0, grown_bytes: int = 0) -> None:
+        """Refuse the refinement before it outgrows the budget, with the estimate.
+
+        ``extra_links`` and ``extra_bytes``: the links about to be evaluated and those the
+        pass keeps beside ``self.links``, and their occluder lists. They are remembered, so
+        that :meth:`_evaluate` can check again as the new links' own lists grow
+        (``grown_bytes``; the lists of a link's children were not counted until the next level).
+        """
+        if not grown_bytes:
+            self._planned = (extra_links, extra_bytes)
         links = len(self.links) + len(self.cluster_r) + len(self.mixed_r) + extra_links
-        # the kept links' occluder lists, and their copy when the pass's links are joined
+        # the kept links' occluder lists, and their copy when the pass's links are joined; and
+        # the classification's temporaries (_candidate_batches)
         estimate = ((len(self.links) + extra_links) * LINK_PEAK_BYTES + 2 * self.links.occluders.occ.nbytes
                     + (len(self.cluster_r) + len(self.mixed_r)) * CLUSTER_LINK_PEAK_BYTES
-                    + len(self.el) * ELEMENT_PEAK_BYTES + extra_bytes)
+                    + len(self.el) * ELEMENT_PEAK_BYTES + extra_bytes + grown_bytes
+                    + CHUNK_CANDIDATES * CANDIDATE_BYTES)
         _memory.check(f"a hierarchy of {links:,} links and {len(self.el):,} elements", int(estimate),
                       "raise link_tolerance or min_element_size (or use a coarser preset)")
 
@@ -930,6 +968,7 @@ class Hierarchy:
             work = self.links.take(split)
             n_first = int(split.sum())
             r, s, parent = self._expand(work)
+            self._check_memory(len(r))
             work = self._evaluate(r, s, (work, parent))
             if self.tree is not None:
                 r, s, n_cluster_split = self._refine_clusters(self.cluster_r, self.cluster_s)
