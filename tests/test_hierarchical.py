@@ -960,3 +960,22 @@ def test_inherited_candidates_are_classified_in_bounded_runs(monkeypatch):
     monkeypatch.setenv(_memory.ENV_BUDGET, str((before + while_growing) // 2))
     with pytest.raises(radiosity.MemoryBudgetError, match="links"):
         solve_h(scene)
+
+
+def test_children_of_a_list_cut_short_walk_again(monkeypatch):
+    """A walk stops at LIST_CAP undecided occluders (a room element behind a tessellated sphere
+    collected thousands); the children of such a link walk the BVH again instead of inheriting
+    the short list, and its rays go through Embree. Capped at 65 (past RAY_LIST_EMBREE and
+    MAX_BLIND_OCCLUDERS, which the cap relies on), the 20-cube furnace room gives the same
+    radiosities as with no cap."""
+    from radiosity.methods.hierarchical import _links
+    from radiosity.visibility._constants import RAY_LIST_EMBREE
+
+    assert _links.LIST_CAP > max(RAY_LIST_EMBREE, _links.MAX_BLIND_OCCLUDERS)
+    scene = cube_room_scene(20)
+    monkeypatch.setattr(_links, "LIST_CAP", 0)
+    whole = solve_h(scene)
+    monkeypatch.setattr(_links, "LIST_CAP", max(RAY_LIST_EMBREE, _links.MAX_BLIND_OCCLUDERS) + 1)
+    capped = solve_h(scene)
+    np.testing.assert_allclose(capped.radiosity, whole.radiosity, rtol=1e-12, atol=0)
+    assert np.abs(capped.radiosity / 2.0 - 1.0).max() < 0.016

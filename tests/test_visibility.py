@@ -722,3 +722,32 @@ def test_pairs_with_long_occluder_lists_trace_through_embree_with_the_same_fract
     middle = [a * n + b for a in (2, 3) for b in (2, 3)]  # under the sphere
     centre = np.isin(i, middle) & (j == i + n * n)  # straight up through it
     assert centre.sum() == 4 and np.all(traced[centre] < 0.5)
+
+
+def test_a_capped_walk_keeps_the_first_undecided_occluders_and_says_so():
+    """``Visibility.list_cap``: a pair's walk stops at that many undecided occluders. Its list
+    is then the first of the full walk's, exactly ``list_cap`` long, also where closed-object
+    culling would drop some (the length is what tells the hierarchy the list may be cut short);
+    every other pair is as without the cap."""
+    from helpers import cube_room_scene
+    from radiosity.visibility import Visibility
+
+    scene = cube_room_scene(20)
+    i, j = all_pairs(scene.n_patches)
+    cap = 40
+    for closed in (False, True):
+        vis = Visibility(scene.patch_quads, scene.patch_normal, scene.patch_object, scene.scale, closed=closed)
+        full = vis.classify(i, j)
+        vis.list_cap = cap
+        capped = vis.classify(i, j)
+        n_full = np.bincount(full[1], minlength=len(i))
+        n_capped = np.bincount(capped[1], minlength=len(i))
+        cut = n_capped == cap
+        assert cut.any() and (~cut & (full[0] == MAYBE)).any() and n_capped.max() == cap
+        assert np.all(capped[0][cut] == MAYBE)
+        np.testing.assert_array_equal(full[0][~cut], capped[0][~cut])
+        np.testing.assert_array_equal(n_full[~cut], n_capped[~cut])
+        if not closed:  # the raw walk: the first cap of its occluders, and only pairs with as many
+            np.testing.assert_array_equal(cut, n_full >= cap)
+            for p in np.flatnonzero(cut)[:20]:
+                np.testing.assert_array_equal(capped[2][capped[1] == p], full[2][full[1] == p][:cap])

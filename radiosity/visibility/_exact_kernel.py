@@ -1194,8 +1194,8 @@ def _box_of(P, nP, Q, nQ, lo, hi):
 
 @njit(cache=True, inline="always")
 def _classify_pair(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, node_hi, node_left, node_right,
-                   node_start, node_count, order, pad, tol, out_occ, stack, lo, hi, si, sj, outside, valid, gi, gj,
-                   planes, nij, behind):
+                   node_start, node_count, order, pad, tol, out_occ, stack, box, si, sj, outside, valid, gi, gj,
+                   planes, nij, behind, cap):
     """Walk the BVH for one pair; write its MAYBE occluders to out_occ (as many as fit).
 
     Returns (status, number of MAYBE occluders, number of hull faces in ``planes`` or -1 where
@@ -1206,8 +1206,13 @@ def _classify_pair(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, nod
     too). A walk that met fewer leaves that to :func:`_hull_tested` (``hull_always``). With
     ``behind`` >= 0 an occluder that lies behind the plane of either patch (unit normals
     ``nij[0]``, ``nij[1]``; see :func:`_behind`) is free without a test: the faces of a cube that
-    touch one of its faces.
+    touch one of its faces. With ``cap`` > 0 the walk stops at the ``cap``-th MAYBE occluder
+    (status MAYBE, ``cap`` of them, hull-tested since ``cap`` >= ``HULL_AFTER``): its list is
+    then not all of them, and a FULL occluder further on is not looked for. ``box`` (2, 3):
+    scratch for the pair's box (one argument, not two: a call of more than 30 arguments is
+    compiled as ``f(*args)``, which numba cannot inline).
     """
+    lo, hi = box[0], box[1]
     _box_of(vi, vi.shape[0], vj, vj.shape[0], lo, hi)
     n_maybe = 0
     met = 0
@@ -1235,6 +1240,8 @@ def _classify_pair(vi, vj, polys, normal, center, inward, olo, ohi, node_lo, nod
             if n_maybe < out_occ.shape[0]:
                 out_occ[n_maybe] = kk
             n_maybe += 1
+            if n_maybe == cap:
+                return 2, n_maybe, n_planes
     return (2 if n_maybe else 0), n_maybe, n_planes
 
 
@@ -1401,7 +1408,7 @@ def _group_status(P, nP, Q, nQ, polys, normal, center, inward, olo, ohi, node_lo
 @njit(cache=True)
 def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, ohi, node_lo, node_hi, node_left,
                     node_right, node_start, node_count, order, pad, tol, status, count, first, starts, occ,
-                    na, nb, behind, runs, hull_always):
+                    na, nb, behind, runs, hull_always, cap):
     """Pairs s..e-1 of :func:`classify_pairs`: first pass (``starts`` empty) or second pass.
 
     In the first pass, runs of pairs with one receiver or one source are classified as a whole
@@ -1413,8 +1420,8 @@ def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, oh
     together span their parent, whose walk was undecided)."""
     nv = polys.shape[1]
     stack = np.empty(2 * node_lo.shape[0] + 2, np.int64)
-    lo = np.empty(3)
-    hi = np.empty(3)
+    box = np.empty((2, 3))
+    lo, hi = box[0], box[1]
     si = np.empty(4)
     sj = np.empty(4)
     outside = np.zeros(nv, np.bool_)
@@ -1439,8 +1446,8 @@ def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, oh
                 nij[0], nij[1] = na[ia[p]], nb[ib[p]]
             st, n, n_planes = _classify_pair(va[ia[p]], vb[ib[p]], polys, normal, center, inward, olo, ohi,
                                              node_lo, node_hi, node_left, node_right, node_start, node_count, order,
-                                             pad, tol, out, stack, lo, hi, si, sj, outside, valid, gi, gj, planes,
-                                             nij, behind)
+                                             pad, tol, out, stack, box, si, sj, outside, valid, gi, gj, planes,
+                                             nij, behind, cap)
             _hull_tested(va[ia[p]], vb[ib[p]], st, n, n_planes, out, olo, ohi, planes, pad, tol, hull_always)
         return
     nmax = max(8, va.shape[1], vb.shape[1])
@@ -1476,8 +1483,8 @@ def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, oh
                         nij[0], nij[1] = na[ia[t]], nb[ib[t]]
                     st, n, n_planes = _classify_pair(va[ia[t]], vb[ib[t]], polys, normal, center, inward, olo, ohi,
                                                      node_lo, node_hi, node_left, node_right, node_start, node_count,
-                                                     order, pad, tol, first[t], stack, lo, hi, si, sj, outside, valid,
-                                                     gi, gj, planes, nij, behind)
+                                                     order, pad, tol, first[t], stack, box, si, sj, outside, valid,
+                                                     gi, gj, planes, nij, behind, cap)
                     status[t], count[t] = _hull_tested(va[ia[t]], vb[ib[t]], st, n, n_planes, first[t], olo, ohi,
                                                        planes, pad, tol, hull_always)
                 single_from = single_to
@@ -1512,7 +1519,8 @@ def _classify_block(s, e, va, ia, vb, ib, polys, normal, center, inward, olo, oh
 
 @njit(cache=True, parallel=True)
 def classify_pairs(va, ia, vb, ib, polys, normal, center, inward, olo, ohi, node_lo, node_hi, node_left,
-                   node_right, node_start, node_count, order, pad, tol, na, nb, behind, runs=True, hull_always=False):
+                   node_right, node_start, node_count, order, pad, tol, na, nb, behind, runs=True, hull_always=False,
+                   cap=0):
     """Classify pairs (va[ia[p]], vb[ib[p]]) against every occluder whose box meets theirs.
 
     The pair's box (vertex min/max) is walked down the occluders' BVH (boxes padded by ``pad``);
@@ -1520,7 +1528,7 @@ def classify_pairs(va, ia, vb, ib, polys, normal, center, inward, olo, ohi, node
     within ``behind`` of the back of either patch's plane (unit normals ``na``, ``nb`` per row of
     ``va``, ``vb``) are left out; with ``behind`` < 0, ``na`` and ``nb`` are not read (pass (1, 3)).
     ``runs`` False: no runs of pairs are classified as a whole (see :func:`_classify_block`);
-    ``hull_always``: see :func:`_classify_pair`.
+    ``hull_always``, ``cap``: see :func:`_classify_pair` (0: no cap).
 
     Returns
     -------
@@ -1539,7 +1547,7 @@ def classify_pairs(va, ia, vb, ib, polys, normal, center, inward, olo, ohi, node
     for blk in prange(n_blocks):
         _classify_block(blk * _PAIR_BLOCK, min(m, (blk + 1) * _PAIR_BLOCK), va, ia, vb, ib, polys, normal, center,
                         inward, olo, ohi, node_lo, node_hi, node_left, node_right, node_start, node_count, order,
-                        pad, tol, status, count, first, none, none, na, nb, behind, runs, hull_always)
+                        pad, tol, status, count, first, none, none, na, nb, behind, runs, hull_always, cap)
     starts = np.zeros(m + 1, np.int64)
     for p in range(m):
         starts[p + 1] = starts[p] + count[p]
@@ -1547,7 +1555,7 @@ def classify_pairs(va, ia, vb, ib, polys, normal, center, inward, olo, ohi, node
     for blk in prange(n_blocks):
         _classify_block(blk * _PAIR_BLOCK, min(m, (blk + 1) * _PAIR_BLOCK), va, ia, vb, ib, polys, normal, center,
                         inward, olo, ohi, node_lo, node_hi, node_left, node_right, node_start, node_count, order,
-                        pad, tol, status, count, first, starts, occ, na, nb, behind, runs, hull_always)
+                        pad, tol, status, count, first, starts, occ, na, nb, behind, runs, hull_always, cap)
     return status, starts, occ
 
 

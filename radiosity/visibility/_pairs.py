@@ -269,6 +269,9 @@ class Visibility:
         # test every undecided occluder of a walk against the pair's hull, as classify_listed
         # tests its candidates (the hierarchy's elements: see _exact_kernel._classify_pair)
         self.hull_always = False
+        # stop a walk at this many undecided occluders (0: never; the hierarchy's elements: see
+        # _exact_kernel._classify_pair and hierarchical._links.LIST_CAP)
+        self.list_cap = 0
         # receiver points whose shadow union GEOS could not compute directly (see _exact._unite)
         self.union_fallbacks: dict[str, int] = {}
 
@@ -350,6 +353,10 @@ class Visibility:
             self._windings["labels"] = winding_labels(self.quads, self.normals, self.groups, self.scale)
         column, labels = self._windings["labels"]
         keep = closed_cull(self.quads, i, j, rows, occ, self.occluders, column, labels, PLANE_REL * self.scale)
+        if self.list_cap > 0:
+            # a list the walk cut short keeps its length: list_cap entries mark it so for the
+            # hierarchy, whose children walk again rather than inherit it
+            keep |= (np.bincount(rows, minlength=len(status)) >= self.list_cap)[rows]
         if keep.all():
             return status, rows, occ
         self.n_closed_culled += int((~keep).sum())
@@ -381,7 +388,7 @@ class Visibility:
                                            occ.center, occ.inward, occ.lo, occ.hi, occ.node_lo, occ.node_hi,
                                            occ.node_left, occ.node_right, occ.node_start, occ.node_count,
                                            occ.order, PLANE_REL * self.scale, PLANE_REL * self.scale,
-                                           normals, normals, behind, runs, self.hull_always)
+                                           normals, normals, behind, runs, self.hull_always, self.list_cap)
             status[s:e] = st
             rows.append(s + np.repeat(np.arange(e - s), np.diff(starts)))
             occs.append(k)

@@ -44,6 +44,14 @@ BLIND_ORDERS = (4,)
 # Blind pairs (rays all without weight) behind more possible occluders than this take no exact
 # shadows in the refinement (ElementVisibility.fractions_undecided): visible 0.5, whole factor in doubt.
 MAX_BLIND_OCCLUDERS = 64
+# A pair's walk of the occluders' BVH stops at this many undecided occluders (Visibility.list_cap).
+# Past RAY_LIST_EMBREE and MAX_BLIND_OCCLUDERS the list's content is used only by the children's
+# classification (Hierarchy._visibility), which walks again for a parent whose list may be cut
+# short; its rays go through Embree and a blind pair is marked 0.5 either way. Without a cap the
+# room elements of a 103k-face furnished room (five 20,480-triangle spheres) collected thousands
+# of sphere triangles a pair, twice (count, then fill): one classification call ran for more than
+# ten minutes, and the CLI solve was still refining after 37 minutes at 15 GB.
+LIST_CAP = 256
 
 
 def link_factors(el: Elements, r: np.ndarray, s: np.ndarray, order: int = RECEIVER_ORDER, *, shape: bool = False
@@ -151,7 +159,14 @@ class ElementVisibility:
         # the children of a link, classified against its undecided occluders, then get what
         # their own walk would (classify_listed tests every candidate against the pair's hull)
         view.hull_always = True
+        view.list_cap = self.list_cap
         return view
+
+    @property
+    def list_cap(self) -> int:
+        """Undecided occluders at which a walk stops (``LIST_CAP``): a list this long may be
+        cut short, and its link's children walk again instead of inheriting it."""
+        return LIST_CAP
 
     def fractions(self, el: Elements, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Visible fraction and "partly visible" flag of each link (r receives from s).
