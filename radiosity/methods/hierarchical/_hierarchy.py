@@ -271,6 +271,17 @@ def _gathered(arrays: list[np.ndarray], rows: list[np.ndarray | None]) -> np.nda
     return out
 
 
+def _in_pair_order(occ: np.ndarray, parts: list[np.ndarray], count: np.ndarray) -> np.ndarray:
+    """``occ``, the lists of the pairs of ``parts`` one part after the other (``count[p]``
+    entries for pair p), reordered so that the pairs come in increasing order."""
+    pairs = np.concatenate(parts)
+    order = np.argsort(pairs, kind="stable")
+    counts = count[pairs]
+    first = np.cumsum(counts) - counts  # where each pair's list starts in occ
+    size = counts[order]
+    return occ[np.repeat(first[order] - (np.cumsum(size) - size), size) + np.arange(len(occ))]
+
+
 def _gathered_lists(lists: list[Undecided], masks: list[np.ndarray | None]) -> np.ndarray:
     """The occluder lists of the links where each of ``masks`` is set (None: all), joined into
     one new array, a part at a time and by boolean mask: the lists run to hundreds of millions
@@ -692,11 +703,7 @@ class Hierarchy:
             del candidates, occ
         occ = np.concatenate(lists)
         if short.any() and not short.all():  # the lists in the pairs' order, as Undecided keeps them
-            order = np.argsort(np.concatenate([part for part, _ in batches]), kind="stable")
-            counts = np.concatenate([count[part] for part, _ in batches])
-            first = np.cumsum(counts) - counts
-            occ = occ[np.repeat(first[order] - (np.cumsum(counts[order]) - counts[order]), counts[order])
-                      + np.arange(len(occ))]
+            occ = _in_pair_order(occ, [part for part, _ in batches], count)
         return visible, partial, count, occ
 
     def _candidate_batches(self, links: Links, parent: np.ndarray, ask: np.ndarray) -> list[np.ndarray]:
