@@ -174,7 +174,7 @@ def test_gathered_links_are_the_masked_parts_joined_with_their_occluder_lists(sh
         fields = [rng.integers(0, 99, n), rng.integers(0, 99, n)] + [rng.random(n) for _ in range(4)]
         fields += [rng.random(n) < 0.5, rng.random(n) < 0.5, rng.integers(-127, 128, (n, 9)).astype(np.int8),
                    rng.random(n).astype(np.float32)]
-        links = Links(*fields, occluders=Undecided(count, rng.integers(0, top, int(count.sum()))))
+        links = Links(*fields, occluders=Undecided(count, rng.integers(0, top, int(count.sum())), rng.random(n) < 0.3))
         parts.append((links, rng.random(n) < 0.6 if masked else None))
     got = Links.gather(parts)
     names = [f for f in Links.__dataclass_fields__ if f != "occluders"]
@@ -186,12 +186,14 @@ def test_gathered_links_are_the_masked_parts_joined_with_their_occluder_lists(sh
     kept = [by_mask(p, m) for p, m in parts]
     want = Links(*(np.concatenate([getattr(k, f) for k in kept]) for f in names),
                  occluders=Undecided(np.concatenate([k.occluders.count for k in kept]),
-                                     np.concatenate([k.occluders.occ for k in kept])))
+                                     np.concatenate([k.occluders.occ for k in kept]),
+                                     np.concatenate([k.occluders.cut for k in kept])))
     for f in names:
         np.testing.assert_array_equal(getattr(got, f), getattr(want, f), err_msg=f)
         assert getattr(got, f).dtype == getattr(want, f).dtype, f
     np.testing.assert_array_equal(got.occluders.count, want.occluders.count)
     np.testing.assert_array_equal(got.occluders.occ, want.occluders.occ)
+    np.testing.assert_array_equal(got.occluders.cut, want.occluders.cut)
     assert got.occluders.occ.dtype == want.occluders.occ.dtype
 
 
@@ -962,12 +964,13 @@ def test_inherited_candidates_are_classified_in_bounded_runs(monkeypatch):
         solve_h(scene)
 
 
-def test_children_of_a_list_cut_short_walk_again(monkeypatch):
+def test_children_of_a_list_cut_short_inherit_it_and_trace_through_embree(monkeypatch):
     """A walk stops at LIST_CAP undecided occluders (a room element behind a tessellated sphere
-    collected thousands); the children of such a link walk the BVH again instead of inheriting
-    the short list, and its rays go through Embree. Capped at 65 (past RAY_LIST_EMBREE and
-    MAX_BLIND_OCCLUDERS, which the cap relies on), the 20-cube furnace room gives the same
-    radiosities as with no cap."""
+    collected thousands); the children of such a link are classified against the short list
+    (for an occluder hiding one wholly), the others are partly visible with their lists marked
+    cut, and their rays go through Embree. Capped at 65 (past RAY_LIST_EMBREE and
+    MAX_BLIND_OCCLUDERS, which the cap relies on), the 20-cube furnace room takes that path and
+    stays within the furnace identity and near the radiosities with no cap."""
     from radiosity.methods.hierarchical import _links
     from radiosity.visibility._constants import RAY_LIST_EMBREE
 
@@ -975,7 +978,60 @@ def test_children_of_a_list_cut_short_walk_again(monkeypatch):
     scene = cube_room_scene(20)
     monkeypatch.setattr(_links, "LIST_CAP", 0)
     whole = solve_h(scene)
+    calls = []
+    plain = _links.ElementVisibility.fractions_undecided
+
+    def counted(self, el, r, s, **kw):
+        calls.append(len(r) if kw.get("incomplete") else 0)
+        return plain(self, el, r, s, **kw)
+
+    monkeypatch.setattr(_links.ElementVisibility, "fractions_undecided", counted)
     monkeypatch.setattr(_links, "LIST_CAP", max(RAY_LIST_EMBREE, _links.MAX_BLIND_OCCLUDERS) + 1)
     capped = solve_h(scene)
-    np.testing.assert_allclose(capped.radiosity, whole.radiosity, rtol=1e-12, atol=0)
+    assert sum(calls) > 1000
+    np.testing.assert_allclose(capped.radiosity, whole.radiosity, rtol=1e-3, atol=0)
     assert np.abs(capped.radiosity / 2.0 - 1.0).max() < 0.016
+
+
+def test_pairs_classified_against_a_cut_list_keep_what_it_decides_and_walk_where_it_says_nothing():
+    """``fractions_undecided(..., incomplete=True)``: the candidates are not all of the pairs'
+    occluders. A pair a candidate hides wholly is hidden (-1); a pair a candidate leaves
+    undecided is partly visible, its list marked cut and its rays traced through Embree (the
+    same fractions as the segment tests against the walk's own lists); a pair no candidate
+    touches walks the BVH, so with no candidates at all the answers are the walk's."""
+    from radiosity.methods.hierarchical._elements import Elements
+    from radiosity.methods.hierarchical._links import ElementVisibility
+    from radiosity.visibility._occluders import FREE, FULL, MAYBE
+    from radiosity.visibility._pairs import _rows_of
+
+    quads, groups = boxes_scene()
+    vis = make_vis(quads, groups, samples=2, max_samples=3)
+    el = Elements(quads, vis.normals, min_size=0.01)
+    i, j = all_pairs(len(quads))
+    ev = ElementVisibility(vis)
+    view = ev._over(el)
+    status, rows, occ = view.classify(i, j)
+    free, full, maybe = (status == k for k in (FREE, FULL, MAYBE))
+    assert free.sum() > 50 and full.sum() > 5 and maybe.sum() > 50
+    every = (np.arange(len(i) + 1) * len(quads), np.tile(np.arange(len(quads)), len(i)))
+    visible, partial, count, listed, cut = ev.fractions_undecided(el, i, j, children=True, candidates=every,
+                                                                  incomplete=True)
+    np.testing.assert_array_equal(visible == -1.0, full)
+    np.testing.assert_array_equal(partial, maybe)
+    np.testing.assert_array_equal(cut, maybe)
+    np.testing.assert_array_equal(visible[free], 1.0)
+    key = i.astype(np.uint64) * np.uint64(len(el)) + j.astype(np.uint64)
+    rays = view._patch_rays(i, j, 3, key, 1)[0]
+    seen = maybe & ~np.isnan(rays)
+    np.testing.assert_array_equal(visible[seen], rays[seen])
+    np.testing.assert_array_equal(visible[maybe & np.isnan(rays)], 0.5)
+    part = np.flatnonzero(seen)
+    sub_rows, sub_occ = _rows_of(rows, occ, part, len(i))
+    segments = view.ray_fraction(i[part], j[part], 3, 3, rows=sub_rows, occ=sub_occ)
+    np.testing.assert_allclose(visible[part], segments, atol=1e-12)
+    assert ((segments > 0) & (segments < 1)).sum() > 20
+    none = (np.zeros(len(i) + 1, np.int64), np.zeros(0, np.int64))
+    walked = ev.fractions_undecided(el, i, j, children=True)
+    alone = ev.fractions_undecided(el, i, j, children=True, candidates=none, incomplete=True)
+    for a, b in zip(walked, alone):
+        np.testing.assert_array_equal(a, b)

@@ -47,7 +47,7 @@ from ._clusters import CLUSTER_MIN_ROOTS, ClusterTree
 from ._clusters_kernel import collect_links, spread_links
 from ._elements import Elements
 from ._links import RECEIVER_ORDER, ElementVisibility, adaptive_factors, link_factors, source_shares
-from ._links_kernel import collect_children, gather_children, near_bounds, source_weights
+from ._links_kernel import collect_children, copy_masked_lists, gather_children, near_bounds, source_weights
 
 __all__ = ["Hierarchy", "LinkOperator", "Links", "HierarchyStats"]
 
@@ -209,8 +209,8 @@ class Links:
         rows = [None if m is None else np.flatnonzero(m) for _, m in parts]
         fields = [_gathered([getattr(p, f) for p, _ in parts], rows) for f in _LINK_ARRAYS]
         lists = [p.occluders for p, _ in parts]
-        counts = _gathered([u.count for u in lists], rows)
-        return Links(*fields, occluders=Undecided(counts, _gathered_lists(lists, [m for _, m in parts])))
+        counts, cut = (_gathered([getattr(u, f) for u in lists], rows) for f in ("count", "cut"))
+        return Links(*fields, occluders=Undecided(counts, _gathered_lists(lists, [m for _, m in parts]), cut))
 
 
 @dataclass
@@ -220,6 +220,10 @@ class Undecided:
 
     count: np.ndarray  # (n_links,) int32
     occ: np.ndarray  # (count.sum(),) int16 or int32, link after link
+    # (n_links,) bool: the list is not all of the link's occluders (a walk stopped at
+    # ``_links.LIST_CAP``, or the link descends from one that did): its children are classified
+    # against it for occluders that hide them wholly, and trace their rays through Embree
+    cut: np.ndarray | None = None
 
     def __post_init__(self):
         # the smallest type that holds them: the lists of a cluttered room's links run to tens
@@ -228,6 +232,7 @@ class Undecided:
         small = self.occ.dtype == np.int16 or self.occ.size == 0 or self.occ.max() < np.iinfo(np.int16).max
         self.occ = self.occ.astype(np.int16 if small else np.int32, copy=False)
         self.count = self.count.astype(np.int32, copy=False)
+        self.cut = np.zeros(len(self.count), bool) if self.cut is None else self.cut.astype(bool, copy=False)
 
     @staticmethod
     def empty(n: int) -> "Undecided":
@@ -235,11 +240,18 @@ class Undecided:
 
     def take(self, mask: np.ndarray) -> "Undecided":
         """The lists of the links where the boolean ``mask`` is set."""
-        return Undecided(self.count[mask], self.occ[np.repeat(mask, self.count)])
+        return Undecided(self.count[mask], self.masked(mask), self.cut[mask])
 
     def only(self, mask: np.ndarray) -> "Undecided":
         """The same links, with the lists of those where ``mask`` is not set emptied."""
-        return Undecided(np.where(mask, self.count, 0), self.occ[np.repeat(mask, self.count)])
+        return Undecided(np.where(mask, self.count, 0), self.masked(mask), self.cut & mask)
+
+    def masked(self, mask: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """The lists of the links where ``mask`` is set, joined (into ``out`` if given)."""
+        if out is None:
+            out = np.empty(int(self.count[mask].sum(dtype=np.int64)), self.occ.dtype)
+        copy_masked_lists(self.occ, self.count, np.asarray(mask, bool), out, 0)
+        return out
 
     def of(self, parent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(starts, occluders), CSR over ``parent``: each entry's link's undecided occluders."""
@@ -284,15 +296,18 @@ def _in_pair_order(occ: np.ndarray, parts: list[np.ndarray], count: np.ndarray) 
 
 def _gathered_lists(lists: list[Undecided], masks: list[np.ndarray | None]) -> np.ndarray:
     """The occluder lists of the links where each of ``masks`` is set (None: all), joined into
-    one new array, a part at a time and by boolean mask: the lists run to hundreds of millions
-    of entries, and int64 indices of all of them at once (8 bytes an entry, against 2 or 4 for
-    the entry) took a 29,536-face room from 4.8 to 12.9 GB in half a minute."""
+    one new array, a part at a time and link by link (:meth:`Undecided.masked`): the lists run to
+    hundreds of millions of entries, and int64 indices of all of them at once (8 bytes an entry,
+    against 2 or 4 for the entry) took a 29,536-face room from 4.8 to 12.9 GB in half a minute."""
     dtype = np.result_type(*(u.occ.dtype for u in lists))
     sizes = [len(u.occ) if m is None else int(u.count[m].sum(dtype=np.int64)) for u, m in zip(lists, masks)]
     out = np.empty(sum(sizes), dtype)
     start = 0
     for u, m, n in zip(lists, masks, sizes):
-        out[start:start + n] = u.occ if m is None else u.occ[np.repeat(m, u.count)]
+        if m is None:
+            out[start:start + n] = u.occ
+        else:
+            u.masked(m, out[start:start + n])
         start += n
     return out
 
@@ -619,8 +634,8 @@ class Hierarchy:
                 spread = np.maximum(spread, _near_bound(self.el, rr, ss, NEAR_BOUND == "near") - (peak - spread))
             ours = None if parents is None else (parents[0], parents[1][a:a + CHUNK_LINKS][facing][useful])
             doomed = self._split_if_partial(rr, ss, factor)
-            visible, partial, count, occ = self._visibility(rr, ss, ours, doomed)
-            undecided = Undecided(count, occ)
+            visible, partial, count, occ, cut = self._visibility(rr, ss, ours, doomed)
+            undecided = Undecided(count, occ, cut)
             deviation = self._visible_deviation(rr, ss, factor, deviation, visible, partial, undecided,
                                                 None if doomed is None else partial & doomed)
             keep = visible >= 0.0  # FULL pairs come back as -1
@@ -658,7 +673,12 @@ class Hierarchy:
         if not len(ask):
             return out
         points, weights = patch_points(self.el.quads[r[ask]], RECEIVER_ORDER)
-        seen = self.vis.at_points(self.el, r[ask], s[ask], points, undecided.of(ask))
+        seen = np.empty(points.shape[:2])
+        cut = undecided.cut[ask]
+        for sel in (~cut, cut):  # a list cut short would miss occluders: Embree for those
+            if sel.any():
+                seen[sel] = self.vis.at_points(self.el, r[ask[sel]], s[ask[sel]], points[sel],
+                                               None if sel is cut else undecided.of(ask[sel]))
         values = (deviation[ask] + factor[ask, None]) * seen
         mean = (values * weights).sum(axis=1) / np.maximum(weights.sum(axis=1), 1e-300)
         out[ask] = values - mean[:, None]
@@ -677,34 +697,33 @@ class Hierarchy:
 
     def _visibility(self, r: np.ndarray, s: np.ndarray, parents: tuple[Links, np.ndarray] | None,
                     split_if_partial: np.ndarray | None = None):
-        """(visible, partial, count, occluders) of pairs (see :meth:`ElementVisibility.fractions_undecided`);
-        with ``parents`` (as :meth:`_evaluate`'s, the index of each of these pairs' parent),
-        children of free links are free, children of partly visible ones take their parent's
-        undecided occluders as candidates, unless the parent's walk stopped at ``list_cap`` of
-        them (``_links.LIST_CAP``): those walk the occluders' BVH themselves."""
+        """(visible, partial, count, occluders, cut) of pairs (see
+        :meth:`ElementVisibility.fractions_undecided`); with ``parents`` (as :meth:`_evaluate`'s,
+        the index of each of these pairs' parent), children of free links are free, children of
+        partly visible ones take their parent's undecided occluders as candidates. Where the
+        parent's list is cut short (``Undecided.cut``) the children are classified against it
+        as an incomplete list (:meth:`ElementVisibility._cut_short`)."""
         if parents is None:
             return self.vis.fractions_undecided(self.el, r, s, split_if_partial=split_if_partial)
         links, parent = parents
         m = len(r)
-        visible, partial, count = np.ones(m), np.zeros(m, bool), np.zeros(m, np.int64)
+        visible, partial, count, cut = np.ones(m), np.zeros(m, bool), np.zeros(m, np.int64), np.zeros(m, bool)
         ask = np.flatnonzero(links.partial[parent])
-        # a list the walk cut short (LIST_CAP) does not hold every occluder of the children
-        cap = self.vis.list_cap
-        short = (links.occluders.count[parent[ask]] >= cap) if cap > 0 else np.zeros(len(ask), bool)
-        batches = [(part, INHERIT_OCCLUDERS) for part in self._candidate_batches(links, parent, ask[~short])]
-        batches += [(ask[short], False)] if short.any() else []
+        short = links.occluders.cut[parent[ask]]
+        batches = [(part, False) for part in self._candidate_batches(links, parent, ask[~short])]
+        batches += [(part, True) for part in self._candidate_batches(links, parent, ask[short])]
         lists = [np.zeros(0, np.int32)]
-        for part, inherit in batches:
-            candidates = links.occluders.of(parent[part]) if inherit else None
-            visible[part], partial[part], count[part], occ = self.vis.fractions_undecided(
-                self.el, r[part], s[part], children=True, candidates=candidates,
+        for part, incomplete in batches:
+            candidates = links.occluders.of(parent[part]) if INHERIT_OCCLUDERS else None
+            visible[part], partial[part], count[part], occ, cut[part] = self.vis.fractions_undecided(
+                self.el, r[part], s[part], children=True, candidates=candidates, incomplete=incomplete,
                 split_if_partial=None if split_if_partial is None else split_if_partial[part])
             lists.append(occ.astype(np.int32))  # kept: 4 bytes, not the kernel's 8
             del candidates, occ
         occ = np.concatenate(lists)
         if short.any() and not short.all():  # the lists in the pairs' order, as Undecided keeps them
             occ = _in_pair_order(occ, [part for part, _ in batches], count)
-        return visible, partial, count, occ
+        return visible, partial, count, occ, cut
 
     def _candidate_batches(self, links: Links, parent: np.ndarray, ask: np.ndarray) -> list[np.ndarray]:
         """The children ``ask`` of partly visible links (``parent``: each child's parent in

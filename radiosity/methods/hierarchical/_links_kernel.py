@@ -1,6 +1,7 @@
 """numba kernels of the element links: G's part for the links that gather from their source's
 children (see :class:`._hierarchy._Children`), applied link by link from each link's value and
-its four shares instead of four entries of a sparse matrix each; the near bound of new links."""
+its four shares instead of four entries of a sparse matrix each; the near bound of new links; the
+copy of the links' occluder lists."""
 
 from __future__ import annotations
 
@@ -29,6 +30,23 @@ def collect_children(r, first, value, shares, y, x):
         f = first[k]
         for c in range(4):
             x[f + c] += taken * shares[k, c]
+
+
+@njit(cache=True)
+def copy_masked_lists(occ, count, mask, out, at):
+    """Copy the lists of the links where ``mask`` is set (``occ``: link after link, ``count[k]``
+    entries for link k) into ``out`` from ``at`` on, in order; returns where they end. One pass:
+    a boolean mask over the entries (``np.repeat(mask, count)``) cost a tenth of a furnished
+    room's solve."""
+    src = 0
+    for k in range(len(count)):
+        c = count[k]
+        if mask[k]:
+            for e in range(src, src + c):
+                out[at] = occ[e]
+                at += 1
+        src += c
+    return at
 
 
 @njit(cache=True, parallel=True)
