@@ -962,6 +962,12 @@ def test_inherited_candidates_are_classified_in_bounded_runs(monkeypatch):
     monkeypatch.setenv(_memory.ENV_BUDGET, str((before + while_growing) // 2))
     with pytest.raises(radiosity.MemoryBudgetError, match="links"):
         solve_h(scene)
+    # a room with one cube keeps short lists: it is not charged a run of candidates it will not have
+    monkeypatch.delenv(_memory.ENV_BUDGET)
+    monkeypatch.setattr(_hierarchy, "CHUNK_CANDIDATES", 8_000_000)
+    seen.clear()
+    solve_h(cube_room_scene(1))
+    assert max(estimate for _, estimate in seen) < 8_000_000 * _hierarchy.CANDIDATE_BYTES
 
 
 def test_children_of_a_list_cut_short_inherit_it_and_trace_through_embree(monkeypatch):

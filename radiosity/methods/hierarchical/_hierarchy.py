@@ -782,11 +782,14 @@ class Hierarchy:
             self._planned = (extra_links, extra_bytes)
         links = len(self.links) + len(self.cluster_r) + len(self.mixed_r) + extra_links
         # the kept links' occluder lists, and their copy when the pass's links are joined; and
-        # the classification's temporaries (_candidate_batches)
+        # the classification's temporaries (_candidate_batches): a run holds at most
+        # CHUNK_CANDIDATES, and at most four children's copies of every list (entries of 2 bytes
+        # or more), so a scene with few lists is not charged the whole run
+        entries = self.links.occluders.occ.size + (extra_bytes + grown_bytes) // 2
         estimate = ((len(self.links) + extra_links) * LINK_PEAK_BYTES + 2 * self.links.occluders.occ.nbytes
                     + (len(self.cluster_r) + len(self.mixed_r)) * CLUSTER_LINK_PEAK_BYTES
                     + len(self.el) * ELEMENT_PEAK_BYTES + extra_bytes + grown_bytes
-                    + CHUNK_CANDIDATES * CANDIDATE_BYTES)
+                    + min(CHUNK_CANDIDATES, 4 * entries) * CANDIDATE_BYTES)
         _memory.check(f"a hierarchy of {links:,} links and {len(self.el):,} elements", int(estimate),
                       "raise link_tolerance or min_element_size (or use a coarser preset)")
 
