@@ -91,11 +91,21 @@ def table(obj: ObjWriter, k: int, corner, rng) -> None:
     obj.add_mesh(f"table{k}_top", "wood", box((cx, top - 0.04, cz), (cx + 1.2, top, cz + 0.7)))
     for j, (dx, dz) in enumerate([(0.05, 0.05), (1.1, 0.05), (0.05, 0.6), (1.1, 0.6)]):
         obj.add_mesh(f"table{k}_leg{j}", "wood", box((cx + dx, 0, cz + dz), (cx + dx + 0.05, top - 0.04, cz + dz + 0.05)))
+    placed: list = []  # (centre, radius) of the boxes' footprints
     for j in range(3):  # small boxes on the table top, rotated about the vertical
         size = rng.uniform(0.05, 0.15, 3)
+        radius = np.hypot(size[0], size[2]) / 2
+        for _ in range(200):  # clear of the boxes already there: boxes that pass through each other are
+            # not a furnished room (the solver notes them: it cannot cut faces where they cross)
+            centre = np.array([cx + rng.uniform(0.2, 1.0), cz + rng.uniform(0.15, 0.55)])
+            if all(np.hypot(*(centre - c)) >= radius + rc + 0.01 for c, rc in placed):
+                break
+        else:
+            continue
+        placed.append((centre, radius))
         m = box(-size / 2, size / 2)
         m.apply_transform(trimesh.transformations.rotation_matrix(rng.uniform(0, np.pi), [0, 1, 0]))
-        m.apply_translation([cx + rng.uniform(0.2, 1.0), top + size[1] / 2, cz + rng.uniform(0.15, 0.55)])
+        m.apply_translation([centre[0], top + size[1] / 2, centre[1]])
         obj.add_mesh(f"table{k}_item{j}", ("red", "blue", "green")[j], m)
 
 
