@@ -1003,8 +1003,9 @@ def test_pairs_classified_against_a_cut_list_keep_what_it_decides_and_walk_where
     """``fractions_undecided(..., incomplete=True)``: the candidates are not all of the pairs'
     occluders. A pair a candidate hides wholly is hidden (-1); a pair a candidate leaves
     undecided is partly visible, its list marked cut and its rays traced through Embree (the
-    same fractions as the segment tests against the walk's own lists); a pair no candidate
-    touches walks the BVH, so with no candidates at all the answers are the walk's."""
+    same fractions as the segment tests against the walk's own lists), unless they are all
+    blocked and a walk finds it hidden; a pair no candidate touches walks the BVH, so with no
+    candidates at all the answers are the walk's."""
     from radiosity.methods.hierarchical._elements import Elements
     from radiosity.methods.hierarchical._links import ElementVisibility
     from radiosity.visibility._occluders import FREE, FULL, MAYBE
@@ -1036,6 +1037,16 @@ def test_pairs_classified_against_a_cut_list_keep_what_it_decides_and_walk_where
     segments = view.ray_fraction(i[part], j[part], 3, 3, rows=sub_rows, occ=sub_occ)
     np.testing.assert_allclose(visible[part], segments, atol=1e-12)
     assert ((segments > 0) & (segments < 1)).sum() > 20
+    # lists without the occluders that hide a pair alone: the pairs the walk finds hidden are
+    # found hidden all the same (their rays all blocked, they walk)
+    single = (np.arange(len(i) * len(quads) + 1), np.tile(np.arange(len(quads)), len(i)))
+    alone_full = view.classify_listed(np.repeat(i, len(quads)), np.repeat(j, len(quads)), *single)[0] == FULL
+    others = np.tile(np.arange(len(quads)), len(i))[~alone_full]
+    short = (np.concatenate([[0], np.cumsum(len(quads) - alone_full.reshape(len(i), -1).sum(axis=1))]), others)
+    visible, partial, _, _, cut = ev.fractions_undecided(el, i, j, children=True, candidates=short, incomplete=True)
+    assert (full & cut).sum() > 5  # hidden only by occluders off their lists
+    np.testing.assert_array_equal(visible == -1.0, full)
+    np.testing.assert_array_equal(partial, maybe)
     none = (np.zeros(len(i) + 1, np.int64), np.zeros(0, np.int64))
     walked = ev.fractions_undecided(el, i, j, children=True)
     alone = ev.fractions_undecided(el, i, j, children=True, candidates=none, incomplete=True)

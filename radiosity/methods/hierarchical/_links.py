@@ -281,6 +281,14 @@ class ElementVisibility:
                 key = r[whole].astype(np.uint64) * np.uint64(len(el)) + s[whole].astype(np.uint64)
                 visible[whole] = view._patch_rays(np.asarray(r[whole], np.int64), np.asarray(s[whole], np.int64),
                                                   n or view.max_samples, key, 1)[0]
+                # every ray blocked (or none carrying weight): an occluder off the list may hide
+                # the pair wholly, which the walk finds (as the children of such links did before,
+                # and dropped them)
+                dark = whole[~(visible[whole] > 0.0)]
+                if len(dark):
+                    hidden = dark[view.classify(r[dark], s[dark], runs=False)[0] == FULL]
+                    visible[hidden] = -1.0
+                    part = np.setdiff1d(part, hidden, assume_unique=True)
             if len(listed):
                 sub_rows, sub_occ = _rows_of(rows, occ, listed, m)
                 visible[listed] = view.ray_fraction(r[listed], s[listed], n, n, rows=sub_rows, occ=sub_occ,
