@@ -48,10 +48,10 @@ MAX_BLIND_OCCLUDERS = 64
 # Past RAY_LIST_EMBREE and MAX_BLIND_OCCLUDERS the list's content is used only by the children's
 # classification (Hierarchy._visibility), which takes it as incomplete (Undecided.cut,
 # ElementVisibility._cut_short); its rays go through Embree and a blind pair is marked 0.5 either
-# way. Without a cap the
-# room elements of a 103k-face furnished room (five 20,480-triangle spheres) collected thousands
-# of sphere triangles a pair, twice (count, then fill): one classification call ran for more than
-# ten minutes, and the CLI solve was still refining after 37 minutes at 15 GB.
+# way. Without a cap the room elements of a 103k-face furnished room (five 20,480-triangle
+# spheres) collected thousands of sphere triangles a pair, twice (count, then fill): one
+# classification call ran for more than ten minutes, and the CLI solve was still refining after
+# 37 minutes at 15 GB.
 LIST_CAP = 256
 
 
