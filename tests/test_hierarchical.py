@@ -1020,7 +1020,8 @@ def test_pairs_classified_against_a_cut_list_keep_what_it_decides_and_walk_where
     status, rows, occ = view.classify(i, j)
     free, full, maybe = (status == k for k in (FREE, FULL, MAYBE))
     assert free.sum() > 50 and full.sum() > 5 and maybe.sum() > 50
-    every = (np.arange(len(i) + 1) * len(quads), np.tile(np.arange(len(quads)), len(i)))
+    n_occ = view.occluders.n_occluders
+    every = (np.arange(len(i) + 1) * n_occ, np.tile(np.arange(n_occ), len(i)))
     visible, partial, count, listed, cut = ev.fractions_undecided(el, i, j, children=True, candidates=every,
                                                                   incomplete=True)
     np.testing.assert_array_equal(visible == -1.0, full)
@@ -1039,10 +1040,10 @@ def test_pairs_classified_against_a_cut_list_keep_what_it_decides_and_walk_where
     assert ((segments > 0) & (segments < 1)).sum() > 20
     # lists without the occluders that hide a pair alone: the pairs the walk finds hidden are
     # found hidden all the same (their rays all blocked, they walk)
-    single = (np.arange(len(i) * len(quads) + 1), np.tile(np.arange(len(quads)), len(i)))
-    alone_full = view.classify_listed(np.repeat(i, len(quads)), np.repeat(j, len(quads)), *single)[0] == FULL
-    others = np.tile(np.arange(len(quads)), len(i))[~alone_full]
-    short = (np.concatenate([[0], np.cumsum(len(quads) - alone_full.reshape(len(i), -1).sum(axis=1))]), others)
+    single = (np.arange(len(i) * n_occ + 1), np.tile(np.arange(n_occ), len(i)))
+    alone_full = view.classify_listed(np.repeat(i, n_occ), np.repeat(j, n_occ), *single)[0] == FULL
+    others = np.tile(np.arange(n_occ), len(i))[~alone_full]
+    short = (np.concatenate([[0], np.cumsum(n_occ - alone_full.reshape(len(i), -1).sum(axis=1))]), others)
     visible, partial, _, _, cut = ev.fractions_undecided(el, i, j, children=True, candidates=short, incomplete=True)
     assert (full & cut).sum() > 5  # hidden only by occluders off their lists
     np.testing.assert_array_equal(visible == -1.0, full)

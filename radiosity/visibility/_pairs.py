@@ -355,7 +355,7 @@ class Visibility:
         keep = closed_cull(self.quads, i, j, rows, occ, self.occluders, column, labels, PLANE_REL * self.scale)
         if self.list_cap > 0:
             # a list the walk cut short keeps its length: list_cap entries mark it so for the
-            # hierarchy, whose children walk again rather than inherit it
+            # hierarchy, whose children take it as incomplete (Undecided.cut)
             keep |= (np.bincount(rows, minlength=len(status)) >= self.list_cap)[rows]
         if keep.all():
             return status, rows, occ
