@@ -1022,8 +1022,8 @@ def test_pairs_classified_against_a_cut_list_keep_what_it_decides_and_walk_where
     assert free.sum() > 50 and full.sum() > 5 and maybe.sum() > 50
     n_occ = view.occluders.n_occluders
     every = (np.arange(len(i) + 1) * n_occ, np.tile(np.arange(n_occ), len(i)))
-    visible, partial, count, listed, cut = ev.fractions_undecided(el, i, j, children=True, candidates=every,
-                                                                  incomplete=True)
+    visible, partial, _, _, cut = ev.fractions_undecided(el, i, j, children=True, candidates=every,
+                                                         incomplete=True)
     np.testing.assert_array_equal(visible == -1.0, full)
     np.testing.assert_array_equal(partial, maybe)
     np.testing.assert_array_equal(cut, maybe)
