@@ -166,7 +166,7 @@ class ElementVisibility:
     @property
     def list_cap(self) -> int:
         """Undecided occluders at which a walk stops (``LIST_CAP``): a list this long may be
-        cut short, and its link's children walk again instead of inheriting it."""
+        cut short, and its link's children take it as incomplete (:meth:`_cut_short`)."""
         return LIST_CAP
 
     def fractions(self, el: Elements, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -196,10 +196,8 @@ class ElementVisibility:
         m = len(r)
         if m == 0:
             return np.ones(0), np.zeros(0, bool)
-        self.patches._occluder()  # one Embree scene, which the views share
         view = self._over(el)
-        key = r.astype(np.uint64) * np.uint64(len(el)) + s.astype(np.uint64)
-        visible, agree = view._patch_rays(np.asarray(r, np.int64), np.asarray(s, np.int64), view.samples, key, 1)
+        visible, agree = self._embree_rays(view, el, r, s, view.samples)
         self.n_rays += view.n_rays
         self.n_traced += m
         # all rays blocked counts as partly visible too: the walk would have found most such
@@ -209,6 +207,14 @@ class ElementVisibility:
         if len(blind):
             visible[blind], partial[blind] = self.fractions(el, r[blind], s[blind])
         return visible, partial
+
+    def _embree_rays(self, view: Visibility, el: Elements, r: np.ndarray, s: np.ndarray, samples: int
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """(fraction, agree) of pairs (r, s) by ``samples**4`` stratified rays cast through
+        Embree against every occluder (:meth:`Visibility._patch_rays` with no lists)."""
+        self.patches._occluder()  # one Embree scene, which the views share
+        key = r.astype(np.uint64) * np.uint64(len(el)) + s.astype(np.uint64)
+        return view._patch_rays(np.asarray(r, np.int64), np.asarray(s, np.int64), samples, key, 1)
 
     def fractions_undecided(self, el: Elements, r: np.ndarray, s: np.ndarray, *, children: bool = False,
                             candidates: tuple[np.ndarray, np.ndarray] | None = None,
@@ -277,10 +283,7 @@ class ElementVisibility:
             n = max(view.samples, view.max_samples) if RETRACE_UNANIMOUS else None
             whole, listed = part[cut[part]], part[~cut[part]]
             if len(whole):  # a list cut short misses occluders: Embree against all of them
-                self.patches._occluder()  # one Embree scene, which the views share
-                key = r[whole].astype(np.uint64) * np.uint64(len(el)) + s[whole].astype(np.uint64)
-                visible[whole] = view._patch_rays(np.asarray(r[whole], np.int64), np.asarray(s[whole], np.int64),
-                                                  n or view.max_samples, key, 1)[0]
+                visible[whole] = self._embree_rays(view, el, r[whole], s[whole], n or view.max_samples)[0]
                 # every ray blocked (or none carrying weight): an occluder off the list may hide
                 # the pair wholly, which the walk finds (as the children of such links did before,
                 # and dropped them)
