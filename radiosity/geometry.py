@@ -11,7 +11,7 @@ import numpy as np
 from . import _tol
 
 __all__ = ["vector_area", "vector_areas", "polygon_normals", "centroids_and_areas", "triangulate", "clip_slots",
-           "FaceList", "flat_faces"]
+           "FaceList", "flat_faces", "convex_groups"]
 
 
 class FaceList(list):
@@ -119,6 +119,59 @@ def centroids_and_areas(quads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     centroid = ((a + b + c) * area1[:, None] + (a + c + d) * area2[:, None]) / (3 * safe[:, None])
     centroid = np.where(area[:, None] > 0, centroid, quads.mean(axis=1))
     return centroid, area
+
+
+def convex_groups(quads: np.ndarray, normals: np.ndarray, groups: np.ndarray) -> np.ndarray:
+    """(g,) bool for each group id 0 .. ``groups.max()``: whether its patches lie on their own
+    convex hull, facing out (the surface of a convex body, or a flat sheet), so that no two of
+    them see each other and the group exchanges no light with itself.
+
+    Each patch must lie in the plane of a facet of the group's hull, with that facet's outward
+    normal, within ``PLANAR_REL`` of the group's size; then every vertex of the group lies on or
+    behind it. Hull facets are matched by their nearest normal, so the test costs
+    O(n log n) per group, not a height for each (patch, vertex) pair: a 20,480-triangle sphere
+    has 2 x 10^8 of those. A group that fails (a table of five boxes, a room seen from inside,
+    a sphere facing in) is simply not convex.
+
+    Parameters
+    ----------
+    quads : (n, 4, 3) float
+        Patches (a triangle repeats a vertex).
+    normals : (n, 3) float
+        Their unit normals.
+    groups : (n,) int
+        The group (object) of each patch, >= 0.
+    """
+    groups = np.asarray(groups, np.int64)
+    n_groups = int(groups.max()) + 1 if len(groups) else 0
+    order = np.argsort(groups, kind="stable")
+    bounds = np.searchsorted(groups[order], np.arange(n_groups + 1))
+    out = np.zeros(n_groups, bool)
+    for g in range(n_groups):
+        members = order[bounds[g]:bounds[g + 1]]
+        out[g] = len(members) > 0 and _on_own_hull(quads[members], normals[members])
+    return out
+
+
+def _on_own_hull(quads: np.ndarray, normals: np.ndarray) -> bool:
+    """:func:`convex_groups` for the patches of one group."""
+    from scipy.spatial import ConvexHull, QhullError, cKDTree
+
+    points = np.unique(quads.reshape(-1, 3), axis=0)
+    tol = _tol.PLANAR_REL * float(np.ptp(points, axis=0).max())
+    centroid = quads.mean(axis=1)
+    if np.abs((points - centroid[0]) @ normals[0]).max() <= tol:
+        return True  # flat: patches in one plane see nothing of each other
+    try:
+        hull = ConvexHull(points)
+    except (QhullError, ValueError):
+        return False
+    unit, offset = hull.equations[:, :3], hull.equations[:, 3]
+    gap, nearest = cKDTree(unit).query(normals)
+    # the normals agree to PLANAR_REL (the height this leaves across the group is within tol)
+    # and the patch lies in the facet's plane
+    height = np.einsum("ij,ij->i", centroid, unit[nearest]) + offset[nearest]
+    return bool(np.all(gap <= _tol.PLANAR_REL) and np.all(np.abs(height) <= tol))
 
 
 def clip_slots(poly: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -16,7 +16,9 @@ start with n^2 links. A link (r gathers from s) between nodes, one of them a clu
   the pair of patches that face each other most (:meth:`ClusterTree.facing_patch`).
 
 A link over ``eps`` is split at its larger cluster (both children); a cluster's link to itself
-always splits (into its children's links to themselves and to each other). A pair of two
+always splits (into its children's links to themselves and to each other). Links between two
+nodes of one convex object (a sphere, a box: :func:`radiosity.geometry.convex_groups`) are
+dropped: no patch of such an object sees another. A pair of two
 input patches becomes an element link (:mod:`._hierarchy`), with its facing test, visibility
 and quadtrees. A cluster's radiosity is the area mean of its patches' (isotropic shooting).
 """
@@ -26,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from ...geometry import convex_groups
 from ._clusters_kernel import (element_bounds, element_estimates, facing_patches, link_bounds, link_estimates,
                                receiver_shares)
 
@@ -34,6 +37,8 @@ __all__ = ["ClusterTree", "CLUSTER_MIN_ROOTS"]
 # Below this many active input patches the hierarchy starts from all facing pairs (n^2 is cheap
 # there and its links carry visibility from the start).
 CLUSTER_MIN_ROOTS = 400
+# Drop the links inside a convex object (ClusterTree._exchanging): they carry nothing.
+DROP_CONVEX = True
 ESTIMATE_DEPTH = 2  # levels of children a cluster link's estimate sums over (see ClusterTree.estimates)
 
 
@@ -111,6 +116,10 @@ class ClusterTree:
         self.patch = np.where(single, order[np.minimum(self.lo, len(order) - 1)], -1)
         self._bounds(quads, np.asarray(reflectance, float))
         self.group = self._groups(np.zeros(self.n_roots, np.int64) if groups is None else np.asarray(groups))
+        # groups (objects) that see nothing of themselves: links inside one are dropped
+        self.convex = np.zeros(max(int(self.group.max()), 0) + 1, bool)
+        if groups is not None and DROP_CONVEX:
+            self.convex = convex_groups(quads[order], self.normals[order], np.asarray(groups)[order])
         internal = np.flatnonzero(~single)
         self.internal = internal  # the cluster nodes (two or more patches)
         self.column = np.full(len(self.lo), -1)
@@ -228,6 +237,7 @@ class ClusterTree:
         kept, pairs, mixed, n_split = [], [], [], 0
         is_patch = self.patch >= 0
         while len(r):
+            r, s = self._exchanging(r, s)
             both = is_patch[r] & is_patch[s]
             pairs.append((self.patch[r[both & (r != s)]], self.patch[s[both & (r != s)]]))
             r, s = r[~both], s[~both]
@@ -254,6 +264,14 @@ class ClusterTree:
             r, s = np.concatenate(new_r), np.concatenate(new_s)
         cat = lambda parts, i: np.concatenate([p[i] for p in parts]) if parts else np.zeros(0, np.int64)  # noqa: E731
         return cat(kept, 0), cat(kept, 1), cat(pairs, 0), cat(pairs, 1), cat(mixed, 0), cat(mixed, 1), n_split
+
+    def _exchanging(self, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The node links (r, s) less those inside one convex group (:func:`convex_groups`),
+        which carry nothing: a 20,480-triangle sphere kept 1.2 M cluster links to itself, each
+        meeting eps only with the rays of its representative pair."""
+        same = (self.group[r] == self.group[s]) & (self.group[r] >= 0)
+        same[same] = self.convex[self.group[r[same]]]
+        return (r[~same], s[~same]) if same.any() else (r, s)
 
     def element_bound(self, centroid: np.ndarray, extent: np.ndarray, normal: np.ndarray, rho: np.ndarray,
                       s: np.ndarray, B: np.ndarray) -> np.ndarray:
