@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import os
 import time
 import warnings
 from dataclasses import dataclass, field, replace
@@ -16,7 +17,7 @@ from ._errors import MemoryBudgetError, RadiosityWarning
 from .methods.uniform.assembly import FillSettings, FillStats, assemble
 from .methods.uniform.cache import FormFactorCache
 from .options import PRESETS, Options, rename_deprecated
-from .scene import Scene
+from .scene import Scene, load_scene
 from .solution import Solution
 from .methods.uniform.system import (SolverReport, bound_rows, energy_balance, gain_note, gained_power,
                                      gaining_patches, solve_system)
@@ -132,13 +133,13 @@ def _prepare_on_cluster(cut, settings, inactive, options, cache, key, timings) -
     return Prepared(cut, F, stats, timings)
 
 
-def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
+def solve(scene: Scene | str | os.PathLike, *, preset: str = "default", **overrides) -> Solution:
     """Solve the scene's radiosity.
 
     Parameters
     ----------
-    scene : Scene
-        From :func:`load_scene`.
+    scene : Scene, or the path of a scene file
+        From :func:`load_scene`; a path is loaded with its defaults.
     preset : {"draft", "default", "fine"}, default: "default"
         Ordered by time and by accuracy; see :data:`radiosity.options.PRESETS`.
     **overrides
@@ -169,6 +170,11 @@ def solve(scene: Scene, *, preset: str = "default", **overrides) -> Solution:
     >>> sorted(solution.object_radiosity())[:2]
     ['back_wall', 'ceiling']
     """
+    if isinstance(scene, (str, os.PathLike)):
+        scene = load_scene(scene)
+    elif not isinstance(scene, Scene):
+        raise TypeError(f"solve takes a Scene (radiosity.load_scene) or a scene file's path, "
+                        f"not {type(scene).__name__}")
     options = Options.from_preset(preset, **overrides)
     if options.method not in METHODS:
         raise TypeError(f"unknown method {options.method!r}; valid: {', '.join(METHODS)}")

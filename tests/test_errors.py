@@ -246,3 +246,14 @@ def test_interrupted_cache_write_leaves_no_entry(tmp_path, monkeypatch):
     second = radiosity.solve(scene, preset="draft")
     assert second.cache_hit
     np.testing.assert_allclose(second.radiosity, first.radiosity)
+
+
+def test_solve_takes_a_path_and_refuses_what_is_neither_a_scene_nor_a_path():
+    """``solve`` loads a scene file's path itself (the same answer as loading it first); a
+    list of faces or an array is refused by name, not with an AttributeError from inside."""
+    path = radiosity.bundled_scene("cornell_box")
+    by_path = radiosity.solve(path, preset="draft", cache=False)
+    loaded = radiosity.solve(radiosity.load_scene(path), preset="draft", cache=False)
+    np.testing.assert_array_equal(by_path.radiosity, loaded.radiosity)
+    with pytest.raises(TypeError, match="solve takes a Scene .* not ndarray"):
+        radiosity.solve(np.zeros((4, 3)))
