@@ -181,9 +181,10 @@ def _leaf_scene(roots: Scene, hier: Hierarchy, leaves: np.ndarray) -> Scene:
 
 def _record(hier: Hierarchy, K: LinkOperator, leaves: np.ndarray) -> None:
     stats = hier.stats
-    stats.links = len(hier.links) + len(hier.cluster_r) + len(hier.mixed_r)
+    stats.links = len(hier.links) + len(hier.cluster_r) + len(hier.mixed_r) + len(hier.reverse_r)
     stats.cluster_links = len(hier.cluster_r)
     stats.mixed_links = len(hier.mixed_r)
+    stats.reverse_mixed_links = len(hier.reverse_r)
     stats.partly_visible_links = int(hier.links.partial.sum())
     stats.pairs_traced = hier.vis.n_traced
     stats.n_rays = hier.vis.n_rays

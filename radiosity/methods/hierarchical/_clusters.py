@@ -29,8 +29,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from ...geometry import convex_groups
-from ._clusters_kernel import (element_bounds, element_estimates, facing_patches, link_bounds, link_estimates,
-                               receiver_shares)
+from ._clusters_kernel import (element_bounds, element_estimates, element_source_bounds, facing_patches,
+                               link_bounds, link_estimates, point_receiver_shares, receiver_shares)
 
 __all__ = ["ClusterTree", "CLUSTER_MIN_ROOTS"]
 
@@ -155,6 +155,7 @@ class ClusterTree:
         self.axis[leaf] = self.normals[self.patch[leaf]]
         self.area_vector = np.zeros((k, 3))  # sum of A_i n_i over the node's patches
         self.area_vector[leaf] = self.area[leaf, None] * self.axis[leaf]
+        self.largest = self.radius.copy()  # the largest patch sphere's radius in each node
         for depth in range(int(self.level.max()), -1, -1):
             nodes = np.flatnonzero((self.level == depth) & (self.patch < 0))
             if not len(nodes):
@@ -170,6 +171,7 @@ class ClusterTree:
             self.radius[nodes] = np.maximum.reduceat(far, np.cumsum(self.hi[nodes] - self.lo[nodes])
                                                      - (self.hi[nodes] - self.lo[nodes]))
             self.area[nodes] = self.area[a] + self.area[b]
+            self.largest[nodes] = np.maximum(self.largest[a], self.largest[b])
             self.area_vector[nodes] = self.area_vector[a] + self.area_vector[b]
             self.rho[nodes] = np.maximum(self.rho[a], self.rho[b])
             mean = self.area[a, None] * self.axis[a] + self.area[b, None] * self.axis[b]
@@ -212,7 +214,7 @@ class ClusterTree:
         return out
 
     def refine(self, r: np.ndarray, s: np.ndarray, B: np.ndarray, eps: float, to_elements: np.ndarray | None = None,
-               min_patches: int = 2):
+               min_patches: int = 2, reverse_below: float = 0.0):
         """Split node links over ``eps`` down to where they meet it or join two patches.
 
         ``to_elements`` (optional, (n_roots,) bool): input patches that may gather from a
@@ -223,6 +225,11 @@ class ClusterTree:
         at least ``min_patches`` patches of one group (object) other than the patch's: the
         estimate from one point of the element leans one way where a cluster wraps round it
         (a floor patch and the walls beside it, one object, in the 100-cube furnace room).
+        The same holds the other way round for clusters whose patches are all smaller than
+        ``reverse_below`` across (0: none): a cluster gathering from such a patch at least as
+        large as itself stops as a reverse mixed link (cluster <- element,
+        :meth:`Hierarchy._refine_reverse`), instead of splitting down to one link per patch of
+        the cluster (a tessellated sphere's triangles each gathered from every wall patch).
 
         Returns
         -------
@@ -232,9 +239,11 @@ class ClusterTree:
             Pairs of distinct input patches (to become element links).
         mixed_r, mixed_s : (q,) int
             Input patches (element indices) and the cluster nodes they gather from.
+        reverse_r, reverse_s : (v,) int
+            Cluster nodes and the input patches (element indices) they gather from.
         n_split : int
         """
-        kept, pairs, mixed, n_split = [], [], [], 0
+        kept, pairs, mixed, back, n_split = [], [], [], [], 0
         is_patch = self.patch >= 0
         while len(r):
             r, s = self._exchanging(r, s)
@@ -246,11 +255,15 @@ class ClusterTree:
             r, s = r[over], s[over]
             if to_elements is not None:
                 # (a cluster of the patch's own object, which may hold the patch itself, splits on)
-                stop = (is_patch[r] & (self.radius[r] >= self.radius[s]) & (self.hi[s] - self.lo[s] >= min_patches)
-                        & (self.group[s] >= 0) & (self.group[s] != self.group[r]))
+                stop = self._stops(r, s, min_patches)
                 stop[stop] = to_elements[self.patch[r[stop]]]
                 mixed.append((self.patch[r[stop]], s[stop]))
                 r, s = r[~stop], s[~stop]
+                if reverse_below > 0.0:
+                    stop = self._stops(s, r, min_patches) & (2.0 * self.largest[r] < reverse_below)
+                    stop[stop] = to_elements[self.patch[s[stop]]]
+                    back.append((r[stop], self.patch[s[stop]]))
+                    r, s = r[~stop], s[~stop]
             n_split += len(r)
             same = r == s
             cr, cs = self.child[r[same]], self.child[s[same]]
@@ -263,7 +276,16 @@ class ClusterTree:
                 new_s += [s[split_r], self.child[s[~split_r], k]]
             r, s = np.concatenate(new_r), np.concatenate(new_s)
         cat = lambda parts, i: np.concatenate([p[i] for p in parts]) if parts else np.zeros(0, np.int64)  # noqa: E731
-        return cat(kept, 0), cat(kept, 1), cat(pairs, 0), cat(pairs, 1), cat(mixed, 0), cat(mixed, 1), n_split
+        return (cat(kept, 0), cat(kept, 1), cat(pairs, 0), cat(pairs, 1), cat(mixed, 0), cat(mixed, 1),
+                cat(back, 0), cat(back, 1), n_split)
+
+    def _stops(self, patch: np.ndarray, node: np.ndarray, min_patches: int) -> np.ndarray:
+        """(m,) links of :meth:`refine` between ``patch`` (a patch node) and a cluster ``node``
+        that may stop as mixed links: the patch at least as large as the cluster, the cluster of
+        at least ``min_patches`` patches of one group other than the patch's."""
+        return ((self.patch[patch] >= 0) & (self.radius[patch] >= self.radius[node])
+                & (self.hi[node] - self.lo[node] >= min_patches) & (self.group[node] >= 0)
+                & (self.group[node] != self.group[patch]))
 
     def _exchanging(self, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The node links (r, s) less those inside one convex group (:func:`convex_groups`),
@@ -282,6 +304,17 @@ class ClusterTree:
                        np.ascontiguousarray(normal, dtype=float), np.ascontiguousarray(rho, dtype=float),
                        np.asarray(s, np.int64), self.centre, self.radius, self.axis, self.cone, self.area,
                        np.ascontiguousarray(B, dtype=float), out)
+        return out
+
+    def element_source_bound(self, r: np.ndarray, centroid: np.ndarray, extent: np.ndarray, normal: np.ndarray,
+                             area: np.ndarray, B: np.ndarray) -> np.ndarray:
+        """(m,) :meth:`bound` of nodes r gathering from flat elements (centroid, circumradius
+        ``extent``, normal, area and radiosity ``B``, per link)."""
+        out = np.empty(len(r))
+        element_source_bounds(np.asarray(r, np.int64), np.ascontiguousarray(centroid, dtype=float),
+                              np.ascontiguousarray(extent, dtype=float), np.ascontiguousarray(normal, dtype=float),
+                              np.ascontiguousarray(area, dtype=float), np.ascontiguousarray(B, dtype=float),
+                              self.centre, self.radius, self.axis, self.cone, self.rho, out)
         return out
 
     def element_estimates(self, centroid: np.ndarray, normal: np.ndarray, s: np.ndarray,
@@ -355,6 +388,20 @@ class ClusterTree:
         receiver_shares(np.asarray(r, np.int64), np.asarray(s, np.int64), ESTIMATE_DEPTH, child, patch, lo, hi, order,
                         self.centroids, normals, areas, self.area, centre, axis, cone, self.area_vector,
                         np.asarray(scale, float), start, share)
+        return start, share
+
+    def point_shares(self, r: np.ndarray, point: np.ndarray, normal: np.ndarray,
+                     scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(start, share) as :meth:`receiver_shares` gives them, for nodes r gathering from flat
+        sources at ``point`` facing ``normal`` (reverse mixed links): each patch by how it and
+        the source face each other over the squared distance."""
+        members = self.hi[r] - self.lo[r]
+        start = np.cumsum(members) - members
+        share = np.empty(int(members.sum()))
+        point_receiver_shares(np.asarray(r, np.int64), np.ascontiguousarray(point, dtype=float),
+                              np.ascontiguousarray(normal, dtype=float), self.lo, self.hi, self.order,
+                              self.centroids, self.normals, self.areas, self.area, np.asarray(scale, float),
+                              start, share)
         return start, share
 
     # ------------------------------------------------------------------ push-pull

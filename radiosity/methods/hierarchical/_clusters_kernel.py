@@ -53,6 +53,21 @@ def element_bounds(centroid, extent, normal, rho_r, s, centre, radius, axis, con
         out[k] = power * factor
 
 
+@njit(cache=True, parallel=True)
+def element_source_bounds(r, centroid, extent, normal, area_s, B_s, centre, radius, axis, cone, rho, out):
+    """out[k] = :func:`link_bounds`' bound of node r[k] gathering from a flat element: a node
+    with centre ``centroid[k]``, radius ``extent[k]``, axis ``normal[k]``, no cone, area
+    ``area_s[k]`` and radiosity ``B_s[k]``."""
+    for k in prange(len(r)):
+        i = r[k]
+        factor = _factor_bound(centre[i], radius[i], axis[i], cone[i], centroid[k], extent[k], normal[k], 0.0,
+                               area_s[k])
+        power = 0.0
+        for c in range(rho.shape[1]):
+            power = max(power, rho[i, c] * B_s[k, c])
+        out[k] = power * factor
+
+
 @njit(cache=True, inline="always")
 def _factor_bound(ci, ri, ai, cone_i, cj, rj, aj, cone_j, area_j):
     """The factor part of :func:`link_bounds` for receiver sphere (ci, ri, normal cone ai,
@@ -225,6 +240,33 @@ def receiver_shares(r, s, depth, child, patch, lo, hi, order, centroids, normals
                 if d2 > 0.0:
                     cos = max(normals[p, 0] * w0 + normals[p, 1] * w1 + normals[p, 2] * w2, 0.0) / math.sqrt(d2)
                     weight += power[j] * cos / d2
+            share[start[k] + t] = weight
+            total += weight * areas[p]
+        mean = total / max(area[node], 1e-300)
+        for t in range(hi[node] - lo[node]):
+            share[start[k] + t] = scale[k] * (share[start[k] + t] / mean if mean > 0.0 else 1.0)
+
+
+@njit(cache=True, parallel=True)
+def point_receiver_shares(r, point, point_normal, lo, hi, order, centroids, normals, areas, area, scale, start,
+                          share):
+    """share[start[k] + t] for patch order[lo[r[k]] + t] of link k's receiver, from a flat
+    source at ``point[k]`` facing ``point_normal[k]``: ``max(0, n . w) max(0, -n_s . w) /
+    |w|^4`` (``w`` from the patch's centroid to the point), scaled so that the area mean over r
+    is 1 (all ones where no patch faces the source), times scale[k]."""
+    for k in prange(len(r)):
+        node = r[k]
+        total = 0.0
+        for t in range(hi[node] - lo[node]):
+            p = order[lo[node] + t]
+            w0, w1, w2 = point[k, 0] - centroids[p, 0], point[k, 1] - centroids[p, 1], point[k, 2] - centroids[p, 2]
+            d2 = w0 * w0 + w1 * w1 + w2 * w2
+            weight = 0.0
+            if d2 > 0.0:
+                cos_r = normals[p, 0] * w0 + normals[p, 1] * w1 + normals[p, 2] * w2
+                cos_s = -(point_normal[k, 0] * w0 + point_normal[k, 1] * w1 + point_normal[k, 2] * w2)
+                if cos_r > 0.0 and cos_s > 0.0:
+                    weight = cos_r * cos_s / (d2 * d2)
             share[start[k] + t] = weight
             total += weight * areas[p]
         mean = total / max(area[node], 1e-300)
