@@ -18,9 +18,9 @@ start with n^2 links. A link (r gathers from s) between nodes, one of them a clu
 A link over ``eps`` is split at its larger cluster (both children); a cluster's link to itself
 always splits (into its children's links to themselves and to each other). Links between two
 nodes of one convex object (a sphere, a box: :func:`radiosity.geometry.convex_groups`) are
-dropped: no patch of such an object sees another. A pair of two
-input patches becomes an element link (:mod:`._hierarchy`), with its facing test, visibility
-and quadtrees. A cluster's radiosity is the area mean of its patches' (isotropic shooting).
+dropped: no patch of such an object sees another. A pair of two input patches becomes an
+element link (:mod:`._hierarchy`), with its facing test, visibility and quadtrees. A cluster's
+radiosity is the area mean of its patches' (isotropic shooting).
 """
 
 from __future__ import annotations
