@@ -160,7 +160,10 @@ def _on_own_hull(quads: np.ndarray, normals: np.ndarray) -> bool:
     points = np.unique(quads.reshape(-1, 3), axis=0)
     tol = _tol.PLANAR_REL * float(np.ptp(points, axis=0).max())
     centroid = quads.mean(axis=1)
-    if np.abs((points - centroid[0]) @ normals[0]).max() <= tol:
+    first = int(np.argmax(np.einsum("ij,ij->i", normals, normals)))  # a patch with a normal
+    if not normals[first].any():
+        return False
+    if np.abs((points - centroid[first]) @ normals[first]).max() <= tol:
         return True  # flat: patches in one plane see nothing of each other
     try:
         hull = ConvexHull(points)

@@ -1099,8 +1099,9 @@ def test_the_hull_of_random_points_is_convex_and_stays_so_moved_or_scaled(seed, 
 
 def test_convex_groups_of_sheets_folds_and_furniture():
     """A flat sheet of many quads, a fold opening outward (a roof ridge) and a box are convex
-    groups; a fold opening inward (two quads that face each other), a table of five boxes and
-    a closed room seen from inside are not. Each group is judged alone."""
+    groups; a fold opening inward (two quads that face each other, also behind a patch of no
+    area, which has no plane to be flat in), a table of five boxes and a closed room seen from
+    inside are not. Each group is judged alone."""
     from radiosity.geometry import convex_groups, polygon_normals
 
     sheet = [rect(0.1 * i, 0.1 * i + 0.1, 0.1 * j, 0.1 * j + 0.1, 0.0) for i in range(5) for j in range(5)]
@@ -1112,12 +1113,14 @@ def test_convex_groups_of_sheets_folds_and_furniture():
         for y in (0, 0.95):
             table += axis_box([x, y, 0], [x + 0.05, y + 0.05, 0.7], inward=False)
     groups = {"sheet": sheet, "ridge": ridge, "valley": valley, "box": axis_box([0, 0, 0], [1, 2, 3], inward=False),
-              "table": table, "room": axis_box([0, 0, 0], [3, 3, 3], inward=True)}
+              "table": table, "room": axis_box([0, 0, 0], [3, 3, 3], inward=True),
+              "valley behind a degenerate patch": [np.zeros((4, 3))] + valley}
     quads = np.array([np.asarray(q, float) for qs in groups.values() for q in qs])
     ids = np.repeat(np.arange(len(groups)), [len(qs) for qs in groups.values()])
     convex = convex_groups(quads, polygon_normals(quads), ids)
     assert dict(zip(groups, convex.tolist())) == {"sheet": True, "ridge": True, "valley": False, "box": True,
-                                                  "table": False, "room": False}
+                                                  "table": False, "room": False,
+                                                  "valley behind a degenerate patch": False}
 
 
 def test_links_inside_a_convex_object_are_dropped_with_the_same_result(tmp_path, monkeypatch):
