@@ -872,18 +872,8 @@ class Hierarchy:
             kept = [(self.reverse_r[still], self.reverse_s[still], self.reverse_factor[still])]
         else:
             kept = []
-        nr, ns, pr, ps, n_split = self._split_reverse(r, s, self.eps)
-        visible, partial = self._reverse_visibility(nr, ns)
-        if CLUSTER_EPS_SHARE < 1.0 and len(nr):
-            tight = partial & (self._reverse_bound(nr, ns) > CLUSTER_EPS_SHARE * self.eps)
-            if tight.any():
-                tr, ts, tpr, tps, t_split = self._split_reverse(nr[tight], ns[tight], CLUSTER_EPS_SHARE * self.eps)
-                t_visible, _ = self._reverse_visibility(tr, ts)
-                nr, ns = np.concatenate([nr[~tight], tr]), np.concatenate([ns[~tight], ts])
-                visible = np.concatenate([visible[~tight], t_visible])
-                pr, ps, n_split = np.concatenate([pr, tpr]), np.concatenate([ps, tps]), n_split + t_split
-        if not CLUSTER_VISIBILITY:
-            visible = np.ones(len(nr))
+        nr, ns, visible, pr, ps, n_split = self._split_to_eps(r, s, self._split_reverse, self._reverse_visibility,
+                                                              self._reverse_bound)
         kept.append((nr, ns, self._reverse_estimates(nr, ns) * visible))
         self.reverse_r, self.reverse_s, self.reverse_factor = (np.concatenate([k[i] for k in kept]) for i in range(3))
         self.stats.reverse_mixed_links = len(self.reverse_r)
@@ -912,14 +902,10 @@ class Hierarchy:
     def _reverse_estimates(self, r: np.ndarray, s: np.ndarray) -> np.ndarray:
         """(m,) isotropic factor of reverse mixed links per unit of the cluster's area:
         ``A_s F_sr / A_r``, F_sr the estimate from the element's Gauss points to the cluster
-        (:meth:`ClusterTree.element_estimates`), area-weighted."""
+        (:meth:`_mixed_estimates` of the element gathering from the cluster)."""
         if not len(r):
             return np.zeros(0)
-        points, weights = patch_points(self.el.quads[s], RECEIVER_ORDER)
-        q = points.shape[1]
-        values = self.tree.element_estimates(points.reshape(-1, 3), np.repeat(self.el.normal[s], q, axis=0),
-                                             np.repeat(r, q)).reshape(-1, q)
-        mean = (values * weights).sum(axis=1) / np.maximum(weights.sum(axis=1), 1e-300)
+        mean, _ = self._mixed_estimates(s, r)
         return self.el.area[s] * mean / np.maximum(self.tree.area[r], 1e-300)
 
     def _refine_mixed(self, r: np.ndarray, s: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
@@ -971,20 +957,33 @@ class Hierarchy:
         factors and deviations at the receiver's Gauss points (:meth:`_mixed_estimates`), and the
         element pairs split off.
         """
-        nr, ns, pr, ps, n_split = self._split_mixed(r, s, B, self.eps)
-        visible, partial = self._mixed_visibility(nr, ns)
+        nr, ns, visible, pr, ps, n_split = self._split_to_eps(
+            r, s, lambda a, b, eps: self._split_mixed(a, b, B, eps), self._mixed_visibility,
+            lambda a, b: self._mixed_bound(a, b, B))
+        factor, shape = self._mixed_estimates(nr, ns)
+        return nr, ns, factor * visible, (shape * visible[:, None]).astype(np.float32), pr, ps, n_split
+
+    def _split_to_eps(self, r: np.ndarray, s: np.ndarray, split, visibility, bound):
+        """Mixed links (either way round) split down to eps by ``split(r, s, eps)``, with the
+        ``visibility(r, s)`` of those kept; the partly visible ones whose ``bound(r, s)`` is over
+        ``CLUSTER_EPS_SHARE`` of eps are split again down to that share, as cluster links are.
+
+        Returns (r, s, visible, patch_r, patch_s, n_split): the kept links, their visible
+        fractions (ones without ``CLUSTER_VISIBILITY``) and the element pairs split off.
+        """
+        nr, ns, pr, ps, n_split = split(r, s, self.eps)
+        visible, partial = visibility(nr, ns)
         if CLUSTER_EPS_SHARE < 1.0 and len(nr):
-            tight = partial & (self._mixed_bound(nr, ns, B) > CLUSTER_EPS_SHARE * self.eps)
+            tight = partial & (bound(nr, ns) > CLUSTER_EPS_SHARE * self.eps)
             if tight.any():
-                tr, ts, tpr, tps, t_split = self._split_mixed(nr[tight], ns[tight], B, CLUSTER_EPS_SHARE * self.eps)
-                t_visible, _ = self._mixed_visibility(tr, ts)
+                tr, ts, tpr, tps, t_split = split(nr[tight], ns[tight], CLUSTER_EPS_SHARE * self.eps)
+                t_visible, _ = visibility(tr, ts)
                 nr, ns = np.concatenate([nr[~tight], tr]), np.concatenate([ns[~tight], ts])
                 visible = np.concatenate([visible[~tight], t_visible])
                 pr, ps, n_split = np.concatenate([pr, tpr]), np.concatenate([ps, tps]), n_split + t_split
         if not CLUSTER_VISIBILITY:
             visible = np.ones(len(nr))
-        factor, shape = self._mixed_estimates(nr, ns)
-        return nr, ns, factor * visible, (shape * visible[:, None]).astype(np.float32), pr, ps, n_split
+        return nr, ns, visible, pr, ps, n_split
 
     def _mixed_estimates(self, r: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(m,) isotropic factor of mixed links, the mean over the receiver's ``RECEIVER_ORDER``
