@@ -923,6 +923,40 @@ def test_element_estimates_of_a_far_cluster_are_lamberts_factors(height, dx, dy,
     assert bound[0] >= max(exact, estimate) * (1 - 1e-9)
 
 
+def test_element_estimates_of_sphere_clusters_seen_at_their_rim():
+    """A point a few node sizes from a cluster of a sphere's triangles, 60-110 degrees off the
+    cluster's axis (the horizon straddles the node): the estimate is the sum of the exact
+    factors to the triangles that face the point within 3%. From each node's centre, which
+    lies inside the sphere, every triangle leans toward the point: that was 26% off here and
+    doubled a reverse link's factor at a sphere's rim."""
+    from helpers import sphere_scene
+
+    from radiosity.formfactors import point_to_polygons
+
+    from radiosity.methods.hierarchical._clusters import ClusterTree
+
+    scene = sphere_scene(8)
+    tree = ClusterTree(np.arange(scene.n_patches), scene.patch_quads, scene.patch_normal, scene.patch_area,
+                       scene.reflectance)
+    rng = np.random.default_rng(1)
+    nodes = tree.internal[(tree.hi - tree.lo)[tree.internal] >= 16]
+    exact, estimate = [], []
+    for k in rng.choice(nodes, 200):
+        side = np.cross(tree.axis[k], rng.normal(size=3))
+        angle = np.radians(rng.uniform(60.0, 110.0))
+        u = np.cos(angle) * tree.axis[k] + np.sin(angle) * side / np.linalg.norm(side)
+        point = tree.centre[k] + rng.uniform(2.0, 6.0) * u
+        members = tree.order[tree.lo[k]:tree.hi[k]]
+        facing = ((point - tree.centroids[members]) * scene.patch_normal[members]).sum(axis=1) > 0
+        exact.append(point_to_polygons(point[None], -u[None], scene.patch_quads[members][facing]).sum())
+        estimate.append(tree.element_estimates(point[None], -u[None], np.array([k]))[0])
+    exact, estimate = np.array(exact), np.array(estimate)
+    seen = exact > 1e-4 * exact.max()
+    assert seen.sum() > 150
+    np.testing.assert_allclose(estimate[seen], exact[seen], rtol=0.03)
+    assert np.abs(estimate - exact).max() < 1e-3
+
+
 def test_links_about_to_split_skip_their_rays_with_the_same_result(monkeypatch):
     """New links that split if partly visible, whatever the fraction, take no rays
     (SKIP_DOOMED): a furnace room of 20 cubes gives the same leaves and radiosities bit for

@@ -321,12 +321,14 @@ class ClusterTree:
                           depth: int = ESTIMATE_DEPTH) -> np.ndarray:
         """(m,) isotropic factor from each element (its centroid and normal) to node s, per unit
         of its area: ``sum_b P_b(-u) max(0, n . u) / (pi d^2)`` over the nodes b ``depth``
-        levels below s, as :meth:`estimates` takes a flat receiver."""
+        levels below s, as :meth:`estimates` takes a flat receiver; a node b whose normal cone
+        straddles the horizon of u is summed patch by patch, each from its own centroid (its
+        centre's direction biased such links high, up to 1.7x at a sphere's rim)."""
         out = np.empty(len(s))
         child, patch, lo, hi, order, normals, areas, centre, axis, cone = self._kernel_tree()
         element_estimates(np.ascontiguousarray(centroid, dtype=float), np.ascontiguousarray(normal, dtype=float),
-                          np.asarray(s, np.int64), depth, child, patch, lo, hi, order, normals, areas,
-                          centre, axis, cone, self.area_vector, out)
+                          np.asarray(s, np.int64), depth, child, patch, lo, hi, order, self.centroids, normals,
+                          areas, centre, axis, cone, self.area_vector, out)
         return out
 
     def estimates(self, r: np.ndarray, s: np.ndarray) -> np.ndarray:

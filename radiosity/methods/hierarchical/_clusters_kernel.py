@@ -187,11 +187,13 @@ def link_estimates(r, s, depth, child, patch, lo, hi, order, normals, areas, cen
 
 
 @njit(cache=True, parallel=True)
-def element_estimates(centroid, normal, s, depth, child, patch, lo, hi, order, normals, areas, centre, axis, cone,
-                      area_vector, out):
+def element_estimates(centroid, normal, s, depth, child, patch, lo, hi, order, centroids, normals, areas, centre,
+                      axis, cone, area_vector, out):
     """out[k] = isotropic factor from the point ``centroid[k]`` (facing ``normal[k]``) to node
-    s[k]: ``sum_b P_b(-u) max(0, n . u) / (pi d^2)`` over the nodes b ``depth`` levels below s[k]
-    (``u``, ``d``: from the point to b's centre), at most 1 (see ClusterTree.element_estimates)."""
+    s[k], summed over the nodes b ``depth`` levels below s[k], at most 1 (see
+    ClusterTree.element_estimates): ``P_b(-u) max(0, n . u) / (pi d^2)`` (``u``, ``d``: from the
+    point to b's centre) where b's normal cone lies on one side of u's plane, and patch by patch
+    from each patch's own centroid where it straddles it."""
     for k in prange(len(s)):
         ends = np.empty(2 ** depth, np.int64)
         n_s = _below(s[k], depth, child, patch, ends)
@@ -201,11 +203,35 @@ def element_estimates(centroid, normal, s, depth, child, patch, lo, hi, order, n
             u0, u1, u2, d2 = _direction(centroid[k], centre[b])
             if d2 <= 0.0:
                 continue
-            cos = normal[k, 0] * u0 + normal[k, 1] * u1 + normal[k, 2] * u2
-            if cos > 0.0:
-                total += cos * _projected(b, -u0, -u1, -u2, lo, hi, order, normals, areas, axis, cone,
-                                          area_vector) / (math.pi * d2)
+            tilt = _angle(axis[b, 0], axis[b, 1], axis[b, 2], -u0, -u1, -u2)
+            if tilt + cone[b] <= _HALF_PI - PROJECTED_MARGIN:
+                cos = normal[k, 0] * u0 + normal[k, 1] * u1 + normal[k, 2] * u2
+                if cos > 0.0:
+                    total += cos * -(area_vector[b, 0] * u0 + area_vector[b, 1] * u1
+                                     + area_vector[b, 2] * u2) / (math.pi * d2)
+            elif tilt - cone[b] < _HALF_PI + PROJECTED_MARGIN:
+                total += _point_to_patches(centroid[k], normal[k], lo[b], hi[b], order, centroids, normals, areas)
         out[k] = min(total, 1.0)
+
+
+@njit(cache=True, inline="always")
+def _point_to_patches(point, point_normal, lo, hi, order, centroids, normals, areas):
+    """``sum_p A_p max(0, n_p . w) max(0, -n . w) / (pi |w|^4)`` over patches order[lo:hi]
+    (``w`` from the point to the patch's centroid): each patch's own direction. A node's centre
+    lies inside a curved surface, closer to the point than its patches' planes, so the
+    centre's direction tilts every patch toward the point: where the node straddles the
+    horizon that took a reverse link of 460 sphere triangles to 1.7x its exact mean, and two
+    triangles' rows of K to 1.15."""
+    total = 0.0
+    for t in range(lo, hi):
+        p = order[t]
+        w0, w1, w2 = centroids[p, 0] - point[0], centroids[p, 1] - point[1], centroids[p, 2] - point[2]
+        cos_s = point_normal[0] * w0 + point_normal[1] * w1 + point_normal[2] * w2
+        cos_p = -(normals[p, 0] * w0 + normals[p, 1] * w1 + normals[p, 2] * w2)
+        if cos_s > 0.0 and cos_p > 0.0:
+            d2 = w0 * w0 + w1 * w1 + w2 * w2
+            total += areas[p] * cos_p * cos_s / (math.pi * d2 * d2)
+    return total
 
 
 @njit(cache=True, parallel=True)
