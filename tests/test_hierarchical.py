@@ -877,6 +877,29 @@ def _furnace_sphere_room(tmp_path, subdivisions: int, radius: float):
         return radiosity.load_scene(path).with_materials(reflectance=0.5, emission=1.0)
 
 
+def test_the_floor_under_a_cylinder_1_cm_above_it_sees_the_whole_base(tmp_path):
+    """A 128-sided cylinder (its base a fan of thin wedges) standing 1 cm above the floor of a
+    6 x 6 x 2 m furnace room, at draft: the floor leaves under the base are within 2% of
+    B = 2. Their 3x3 points missed the peak of each wedge's apex (0.0034 for 0.0133) and the
+    leaves cannot split to take the near bound: -6.2% before such links took the adaptive
+    quadrature's factor (EXACT_NEAR_LEAVES)."""
+    import trimesh
+
+    cylinder = trimesh.creation.cylinder(radius=0.4, height=1.0, sections=128)
+    cylinder.apply_translation([1.0, 1.0, 0.51])
+    path = write_obj(tmp_path / "cylinder_room.obj", {"room": axis_box([0, 0, 0], [6, 6, 2], inward=True),
+                                                      "cylinder": list(cylinder.vertices[cylinder.faces])})
+    with pytest.warns(radiosity.RadiosityWarning, match="no face emits"):
+        scene = radiosity.load_scene(path).with_materials(reflectance=0.5, emission=1.0)
+    solution = solve_h(scene)
+    error = solution.radiosity[:, 0] / 2.0 - 1.0
+    centre = solution.scene.patch_quads.mean(axis=1)
+    under = (np.hypot(centre[:, 0] - 1.0, centre[:, 1] - 1.0) < 0.4) & (centre[:, 2] < 1e-6)
+    assert under.sum() >= 8
+    assert np.abs(error[under]).max() < 0.02
+    assert solution.summary()["hierarchy"]["exact_near_links"] > 0
+
+
 @pytest.mark.slow
 def test_a_tessellated_sphere_gathers_through_mixed_links(tmp_path, monkeypatch):
     """A furnace room holding an icosphere of 1,280 triangles, at draft: room elements gather
