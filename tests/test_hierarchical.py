@@ -980,6 +980,32 @@ def test_element_estimates_of_sphere_clusters_seen_at_their_rim():
     assert np.abs(estimate - exact).max() < 1e-3
 
 
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_spread_links_on_threads_adds_what_one_pass_adds(threads):
+    """The oriented cluster links' part of G @ x, each thread spreading a run of links into
+    its own copy of y: the same sums as adding link by link (to rounding), whatever the runs."""
+    from radiosity.methods.hierarchical._clusters_kernel import PARALLEL_VALUES, spread_links
+
+    rng = np.random.default_rng(4)
+    n, nodes, links = 5_000, 400, 6_000
+    order = rng.permutation(n)
+    lo = rng.integers(0, n - 100, nodes)
+    hi = lo + rng.integers(1, 100, nodes)
+    r, column = rng.integers(0, nodes, links), rng.integers(0, n, links)
+    members = hi[r] - lo[r]
+    start = np.cumsum(members) - members
+    value = rng.random(int(members.sum()))
+    assert len(value) > 3 * PARALLEL_VALUES
+    x = rng.random(n)
+    x[::7] = 0.0
+    expected = rng.random(n)
+    y = expected.copy()
+    for k in range(links):
+        np.add.at(expected, order[lo[r[k]]:hi[r[k]]], value[start[k]:start[k] + members[k]] * x[column[k]])
+    spread_links(r, column, lo, hi, order, start, value, x, y, threads)
+    np.testing.assert_allclose(y, expected, rtol=1e-12)
+
+
 def test_links_about_to_split_skip_their_rays_with_the_same_result(monkeypatch):
     """New links that split if partly visible, whatever the fraction, take no rays
     (SKIP_DOOMED): a furnace room of 20 cubes gives the same leaves and radiosities bit for

