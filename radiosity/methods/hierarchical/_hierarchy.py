@@ -508,8 +508,8 @@ class HierarchyStats:
 
     def summary(self) -> dict:
         keys = ("rounds", "converged", "links", "partly_visible_links", "links_evaluated", "pairs_traced",
-                "exact_links", "exact_near_links", "elements", "leaves", "max_level", "roots", "initial_links", "clusters", "cluster_links",
-                "mixed_links", "reverse_mixed_links", "min_element_size",
+                "exact_links", "exact_near_links", "elements", "leaves", "max_level", "roots", "initial_links",
+                "clusters", "cluster_links", "mixed_links", "reverse_mixed_links", "min_element_size",
                 "eps", "memory_bytes", "split_per_round", "rows_over_one",
                 "max_row_sum")
         return {k: getattr(self, k) for k in keys}
