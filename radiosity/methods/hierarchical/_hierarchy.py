@@ -1355,20 +1355,29 @@ class Hierarchy:
         # 300k-face sphere): kept link by link, without row and column indices
         spread = _Spread(r, column[s], *tree.receiver_shares(r, s, factor), tree)
         # reverse mixed links: the element's radiosity to the cluster's patches, by how each
-        # faces it (the element's column is its own index)
+        # faces it and whether it sees it (the element's column is its own index)
         el, vr, vs = self.el, self.reverse_r, self.reverse_s
         if REVERSE_PATCH_VISIBILITY:
             start, share = tree.point_shares(vr, el.centroid[vs], el.normal[vs], self.reverse_estimate)
-            share *= self._reverse_patch_seen(vr, vs)
+            self._apply_patch_seen(vr, vs, start, share)
         else:
             start, share = tree.point_shares(vr, el.centroid[vs], el.normal[vs], self.reverse_factor)
         spread_back = _Spread(vr, vs, start, share, tree)
         return push, Gather(gather.tocsr(), [children, spread, spread_back]), pull
 
-    def _reverse_patch_seen(self, r: np.ndarray, s: np.ndarray) -> np.ndarray:
-        """1 or 0 for each patch of each reverse mixed link's cluster (in :meth:`point_shares`'
-        order): whether a segment from the patch's centroid to the element's centroid passes.
-        Traced once a link (``_reverse_seen``), when an operator first holds it."""
+    def _apply_patch_seen(self, r: np.ndarray, s: np.ndarray, start: np.ndarray, share: np.ndarray) -> None:
+        """Zero in ``share`` (:meth:`ClusterTree.point_shares` of the reverse mixed links (r, s))
+        the patches that do not see their link's element (:meth:`_reverse_patch_seen`), link by
+        link: one float array of every share's visibility held 0.8 GB more at the 103k room's peak."""
+        seen = self._reverse_patch_seen(r, s)
+        for k, mask in enumerate(seen):
+            share[start[k]:start[k] + len(mask)] *= mask
+
+    def _reverse_patch_seen(self, r: np.ndarray, s: np.ndarray) -> list[np.ndarray]:
+        """For each reverse mixed link (r, s), whether each patch of its cluster (in
+        :meth:`point_shares`' order) sees the element: a segment from the patch's centroid to the
+        element's centroid. Traced once a link (``_reverse_seen``), when an operator first holds
+        it; links no longer held are forgotten."""
         tree, el = self.tree, self.el
         keys = (r.astype(np.int64) << 32) | s.astype(np.int64)
         cache = self._reverse_seen
@@ -1387,11 +1396,11 @@ class Hierarchy:
             self.vis.n_rays += len(seen)
             bounds = np.concatenate([[0], np.cumsum(members[a:b])])
             for i, k in enumerate(keys[links].tolist()):
-                cache[k] = seen[bounds[i]:bounds[i + 1]]
+                cache[k] = seen[bounds[i]:bounds[i + 1]].copy()  # not a view: a chunk outlives its links
             a = b
-        if not len(keys):
-            return np.zeros(0)
-        return np.concatenate([cache[k] for k in keys.tolist()]).astype(float)
+        held = [cache[k] for k in keys.tolist()]
+        self._reverse_seen = dict(zip(keys.tolist(), held))
+        return held
 
     def solve(self, rtol: float, clamp: bool = False) -> tuple[np.ndarray, LinkOperator, np.ndarray, SolveReport]:
         """Leaf radiosities (l, 3) of B = E + rho K B; element radiosities are pulled from them.
