@@ -1391,9 +1391,13 @@ class Hierarchy:
             links = new[a:b]
             seg, pos = _cluster_ranges(tree.lo[r[links]], tree.hi[r[links]])
             patch, source = tree.order[pos], s[links][seg]
-            seen = ~self.vis.patches._occluder().occluded(tree.centroids[patch] + off * tree.normals[patch],
-                                                          el.centroid[source] + off * el.normal[source])
-            self.vis.n_rays += len(seen)
+            traced = _facing_or_all(tree.centroids[patch], tree.normals[patch], el.centroid[source],
+                                    el.normal[source], seg, len(links))
+            seen = np.zeros(len(patch), bool)
+            seen[traced] = ~self.vis.patches._occluder().occluded(
+                tree.centroids[patch[traced]] + off * tree.normals[patch[traced]],
+                el.centroid[source[traced]] + off * el.normal[source[traced]])
+            self.vis.n_rays += len(traced)
             bounds = np.concatenate([[0], np.cumsum(members[a:b])])
             for i, k in enumerate(keys[links].tolist()):
                 cache[k] = seen[bounds[i]:bounds[i + 1]].copy()  # not a view: a chunk outlives its links
@@ -1426,6 +1430,19 @@ class Hierarchy:
             report.fallback.append(fallback)
         self.B = (K.pull @ B)[:len(self.el)]
         return B, K, leaves, report
+
+
+def _facing_or_all(centroid: np.ndarray, normal: np.ndarray, point: np.ndarray, point_normal: np.ndarray,
+                   seg: np.ndarray, n_links: int) -> np.ndarray:
+    """Indices of the patches (one row each, of link ``seg``) whose visibility of their link's
+    element matters: those that face it and that it faces, as :func:`point_receiver_shares`
+    weighs them (the others take no share), or every patch of a link none of whose patches
+    does (they then share alike). Most of a cluster faces away from a reverse link's element:
+    tracing only the rest saved most of 157 M segments in the 103k room."""
+    w = point - centroid
+    facing = (np.einsum("ij,ij->i", normal, w) > 0.0) & (np.einsum("ij,ij->i", point_normal, w) < 0.0)
+    none = np.bincount(seg[facing], minlength=n_links) == 0
+    return np.flatnonzero(facing | none[seg])
 
 
 class _Triplets:
