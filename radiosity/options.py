@@ -95,9 +95,11 @@ class Options:
         exceeds this fraction of the scene's mean emitted exitance (emitted power / area).
     leaf_tolerance : float
         Hierarchical only: an element splits (all its links move to its children) while the
-        radiosity its links gather, summed at its receiver points, strays from its mean by more
-        than this fraction of the scene's mean emitted exitance at one of them: the error each
-        level pushes onto the leaves below, which one link at a time does not bound. 0: off.
+        radiosity its links gather, summed at its receiver points, strays from the quadratic
+        that carries it onto the leaves below by more than a tenth of this fraction of the
+        scene's mean emitted exitance at one of them (its 9 points see less of the fit's error
+        than the leaves between them), or from its mean by twice it: the error each level
+        pushes onto the leaves, which one link at a time does not bound. 0: off.
     min_element_rel : float
         Hierarchical only: smallest element edge as a fraction of the scene's bounding-box
         diagonal (unless ``min_element_size`` is given).

@@ -32,6 +32,31 @@ def collect_children(r, first, value, shares, y, x):
             x[f + c] += taken * shares[k, c]
 
 
+@njit(cache=True, parallel=True)
+def gather_deviations(indptr, column, codes, scale, x, out):
+    """out[q, i] += codes[k, i] * scale[k] * x[column[k]] for the links k of receiver q
+    (``indptr[q]:indptr[q + 1]``): :class:`._variation.Variation`'s part of G @ x. Receivers
+    are rows of their own, so they run in parallel."""
+    for q in prange(len(indptr) - 1):
+        for k in range(indptr[q], indptr[q + 1]):
+            v = scale[k] * x[column[k]]
+            if v != 0.0:
+                for i in range(codes.shape[1]):
+                    out[q, i] += codes[k, i] * v
+
+
+@njit(cache=True)
+def collect_deviations(indptr, column, codes, scale, y, x):
+    """x[column[k]] += scale[k] * sum_i codes[k, i] * y[q, i] (the transpose of
+    :func:`gather_deviations`; serial: links of one source add into the same entry)."""
+    for q in range(len(indptr) - 1):
+        for k in range(indptr[q], indptr[q + 1]):
+            t = 0.0
+            for i in range(codes.shape[1]):
+                t += codes[k, i] * y[q, i]
+            x[column[k]] += scale[k] * t
+
+
 @njit(cache=True)
 def copy_masked_lists(occ, count, mask, out, at):
     """Copy the lists of the links where ``mask`` is set (``occ``: link after link, ``count[k]``
