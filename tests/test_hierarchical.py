@@ -492,16 +492,20 @@ def test_a_cabinet_1_cm_from_a_wall_lights_the_wall_behind_it(tmp_path):
 
 def test_furnace_box_near_a_wall_at_the_draft_element_size(tmp_path):
     """A furnace room with a cabinet 10 cm from a wall, at draft (elements down to 1/50 of the
-    diagonal): B = E / (1 - rho) within 3% on every leaf at draft's own leaf_tolerance, within
-    1% at 1e-2. Measured 2026-12-06: -2.7% / +2.7%, and -0.95% / +0.72% at 1e-2. Before the
-    links' visibility was measured at each receiver point (RECEIVER_VISIBILITY), -20% / +11%
-    and -7.6% / +5.9%: the wall elements behind the cabinet got the far room's light through
-    the mean visibility of elements that straddle the cabinet's shadow."""
+    diagonal): B = E / (1 - rho) within 2% on every leaf at draft's own leaf_tolerance, within
+    1.5% at 1e-2. Measured 2026-12-06: -2.7% / +2.7%, and -0.95% / +0.72% at 1e-2; since the
+    quadratic push (session 40) -0.91% / +1.47% and -0.79% / +1.40%: the worst leaf at 1e-2, a
+    1.6 cm floor strip in the gap by the cabinet's end, gets +4.6% from its links' means (its
+    2 x 0.125 m ancestor's links, which the old leaf test split at 1e-2 and the new one leaves
+    to the quadratic) and -1.8% from the quadratic. Before the links' visibility was measured at
+    each receiver point (RECEIVER_VISIBILITY), -20% / +11% and -7.6% / +5.9%: the wall
+    elements behind the cabinet got the far room's light through the mean visibility of
+    elements that straddle the cabinet's shadow."""
     path = write_obj(tmp_path / "gap.obj", {"room": axis_box([0, 0, 0], [6, 3, 4], inward=True),
                                             "cabinet": axis_box([0.5, 0.0, 3.65], [2.0, 1.8, 3.9], inward=False)})
     with pytest.warns(radiosity.RadiosityWarning):
         scene = radiosity.load_scene(path).with_materials(reflectance=0.5, emission=1.0)
-    for leaf_tolerance, bound in ((Options.from_preset("draft").leaf_tolerance, 0.03), (1e-2, 0.01)):
+    for leaf_tolerance, bound in ((Options.from_preset("draft").leaf_tolerance, 0.02), (1e-2, 0.015)):
         s = radiosity.solve(scene, method="hierarchical", preset="draft", min_element_rel=1 / 50, cache=False,
                             leaf_tolerance=leaf_tolerance)
         error = s.radiosity[~s.scene.patch_hidden] / 2 - 1
