@@ -1387,3 +1387,19 @@ def test_an_empty_room_meets_the_furnace_identity_at_draft(tmp_path, monkeypatch
     assert np.abs(solve_h(scene).radiosity / 2.0 - 1.0).max() < 5e-3
     monkeypatch.setattr(_hierarchy, "QUADRATIC_PUSH", False)
     assert np.abs(solve_h(scene).radiosity / 2.0 - 1.0).max() > 1.5e-2
+
+
+def test_the_quadratic_push_is_the_same_in_chunks(furnace, monkeypatch):
+    """The push's fits and leaf means go through the receivers in chunks (all at once they took
+    0.5 kB a receiver): the same matrix in chunks of 7 as in one."""
+    from radiosity.methods.hierarchical import _variation
+
+    hier = build_hierarchy(furnace, Options.from_preset("draft", link_tolerance=1e-2, min_element_rel=1 / 10))
+    hier.refine()
+    leaves = hier.el.leaves()
+    receivers = np.unique(hier.links.r[hier.el.first_child[hier.links.r] >= 0])
+    assert len(receivers) > 20
+    whole = _variation.variation_push(hier.el, receivers, leaves)
+    monkeypatch.setattr(_variation, "CHUNK_PAIRS", 7)
+    chunked = _variation.variation_push(hier.el, receivers, leaves)
+    assert abs(whole - chunked).max() < 1e-12 and whole.nnz == chunked.nnz > 0

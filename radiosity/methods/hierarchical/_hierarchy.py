@@ -57,9 +57,10 @@ from ._variation import Variation, fit_residuals, variation_part
 
 __all__ = ["Hierarchy", "LinkOperator", "Links", "HierarchyStats"]
 
-# Bytes per stored link (ends, factor, spread, visibility, flags, point deviations, G's CSR entry): what
-# the peak rates below are measured against.
-LINK_BYTES = 8 + 8 + 8 + 8 + 8 + 2 + 9 + 4 + 12 + 40
+# Bytes per stored link (ends, factor, spread, visibility, flags, point deviations, G's CSR entry,
+# and, above the leaves, its deviations in G's variation part): what the peak rates below are
+# measured against.
+LINK_BYTES = 8 + 8 + 8 + 8 + 8 + 2 + 9 + 4 + 12 + 40 + 17
 # What a link costs at the peak of a solve, with the refinement's batches (and, for cluster
 # links, the estimates' node pairs), per link the check counts (the kept links and the new
 # candidates): on the Cornell box at fine, 3.5 mm, link_tolerance 5e-4, 2.32 GB above the RSS

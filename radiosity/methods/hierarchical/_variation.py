@@ -26,7 +26,7 @@ from ...formfactors import patch_points
 from ._elements import Elements
 from ._links_kernel import collect_deviations, gather_deviations
 
-CHUNK_PAIRS = 1 << 17  # (leaf, ancestor) pairs per numpy batch of :func:`variation_push`: 9 x 5 floats each
+CHUNK_PAIRS = 1 << 16  # receivers, or (leaf, ancestor) pairs, per numpy batch: 9 x 5 floats each
 
 
 @dataclass
@@ -77,21 +77,27 @@ def variation_part(el: Elements, r: np.ndarray, s: np.ndarray, codes: np.ndarray
 
 def variation_push(el: Elements, receivers: np.ndarray, leaves: np.ndarray) -> sp.csr_matrix:
     """(n_leaves, 9 m) sparse: leaf l's mean of the quadratic that fits receiver q's gathered
-    point deviations, for each ancestor q of l among ``receivers`` (sorted)."""
-    fit, centre, axes, mean = _quadratic_fits(el, receivers)
+    point deviations, for each ancestor q of l among ``receivers`` (sorted).
+
+    Receivers go in chunks of ``CHUNK_PAIRS`` with the (leaf, ancestor) pairs below them: the
+    fits of every receiver at once took 0.5 kB each (a million-face scene has about as many
+    receivers)."""
     rows, elements = el.ancestry(leaves)
-    q = np.searchsorted(receivers, elements)
-    q = np.minimum(q, len(receivers) - 1)
+    q = np.minimum(np.searchsorted(receivers, elements), len(receivers) - 1)
     hit = np.flatnonzero(receivers[q] == elements)
-    rows, q = rows[hit], q[hit]
-    points, weights = patch_points(el.quads[leaves], 3)
-    weights = weights / np.maximum(weights.sum(axis=1, keepdims=True), 1e-300)
+    order = hit[np.argsort(q[hit], kind="stable")]
+    rows, q = rows[order], q[order]
     values = np.empty((len(rows), 9))
-    for a in range(0, len(rows), CHUNK_PAIRS):
-        lr, lq = rows[a:a + CHUNK_PAIRS], q[a:a + CHUNK_PAIRS]
-        basis = _basis(points[lr], centre[lq], axes[lq]) - mean[lq][:, None, :]  # (p, 9 points, 5)
-        leaf_mean = np.einsum("pi,pik->pk", weights[lr], basis)
-        values[a:a + CHUNK_PAIRS] = np.einsum("pk,pki->pi", leaf_mean, fit[lq])
+    for a in range(0, len(receivers), CHUNK_PAIRS):
+        fit, centre, axes, mean = _quadratic_fits(el, receivers[a:a + CHUNK_PAIRS])
+        first, last = np.searchsorted(q, [a, a + CHUNK_PAIRS])
+        for b in range(first, last, CHUNK_PAIRS):
+            pair = slice(b, min(b + CHUNK_PAIRS, last))
+            at = q[pair] - a
+            points, weights = patch_points(el.quads[leaves[rows[pair]]], 3)
+            weights = weights / np.maximum(weights.sum(axis=1, keepdims=True), 1e-300)
+            basis = _basis(points, centre[at], axes[at]) - mean[at][:, None, :]  # (p, 9 points, 5)
+            values[pair] = np.einsum("pk,pki->pi", np.einsum("pi,pik->pk", weights, basis), fit[at])
     columns = 9 * q[:, None] + np.arange(9)
     return sp.csr_matrix((values.ravel(), (np.repeat(rows, 9), columns.ravel())),
                          shape=(len(leaves), 9 * len(receivers)))
