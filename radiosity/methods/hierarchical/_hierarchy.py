@@ -189,7 +189,8 @@ REVERSE_PATCH_VISIBILITY = True
 # Each element link's variation across its receiver reaches the leaves below it as the
 # quadratic fitting its Gauss points' deviations (:mod:`._variation`), not as the receiver's
 # mean alone: an empty 6 x 5 x 3 m furnace room's leaves went from -2.0% / +2.4% to within
-# 0.02% at draft, the room of primitives' from -3.44% / +3.08% to -1.40% / +1.47%.
+# 0.02% at draft, the room of primitives' from -3.44% / +3.08% to -1.40% / +1.47% (with the
+# old split test; with FIT_LEAF_TEST below, 0.14% and -1.19% / +1.64% in fewer links).
 QUADRATIC_PUSH = True
 # With it, the leaf tolerance splits a receiver where what the quadratic leaves out at one of
 # its points passes FIT_LEAF_SHARE of leaf_eps (the 9 points see less of the fit's error than
