@@ -1367,16 +1367,20 @@ class Hierarchy:
         links = self.links
         r, s, codes, scale = links.r, links.s, links.shape, links.shape_scale
         if self.tree is not None and len(self.mixed_r):  # element <- cluster: the cluster's column
-            tree = self.tree
-            column = np.where(tree.patch >= 0, tree.patch, len(self.el) + tree.column)
             mixed_codes, mixed_scale = _shape_codes(self.mixed_shape)
-            r, s = np.concatenate([r, self.mixed_r]), np.concatenate([s, column[self.mixed_s]])
+            r, s = np.concatenate([r, self.mixed_r]), np.concatenate([s, self._node_columns()[self.mixed_s]])
             codes, scale = np.concatenate([codes, mixed_codes]), np.concatenate([scale, mixed_scale])
         found = variation_part(self.el, r, s, codes, scale, leaves)
         if found is None:
             return push, gather
         part, columns = found
         return sp.hstack([push, columns], format="csr"), Gather(gather.matrix, gather.parts, part)
+
+    def _node_columns(self) -> np.ndarray:
+        """(n_nodes,) each cluster node's column of G: a patch node's input patch (its root
+        element), an internal node's row after the elements'."""
+        tree = self.tree
+        return np.where(tree.patch >= 0, tree.patch, len(self.el) + tree.column)
 
     def _gather_entries(self) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], _Children]:
         """G's element links: (rows, columns, values) of those whose source is a leaf, and
@@ -1414,7 +1418,7 @@ class Hierarchy:
         push = sp.hstack([push, inside.T.tocsr()], format="csr")
         pull = sp.vstack([pull, pull_c], format="csr")
         del share, pull_c, inside
-        column = np.where(tree.patch >= 0, tree.patch, ne + tree.column)
+        column = self._node_columns()
         oriented = (tree.patch[self.cluster_r] < 0) & (tree.cone[self.cluster_r] > ORIENT_CONE)
         even = ~oriented
         r, s, factor = self.cluster_r[oriented], self.cluster_s[oriented], self.cluster_factor[oriented]

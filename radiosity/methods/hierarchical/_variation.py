@@ -89,7 +89,7 @@ def variation_push(el: Elements, receivers: np.ndarray, leaves: np.ndarray) -> s
     rows, q = rows[order], q[order]
     values = np.empty((len(rows), 9))
     for a in range(0, len(receivers), CHUNK_PAIRS):
-        fit, centre, axes, mean = _quadratic_fits(el, receivers[a:a + CHUNK_PAIRS])
+        fit, centre, axes, mean, _ = _quadratic_fits(el, receivers[a:a + CHUNK_PAIRS])
         first, last = np.searchsorted(q, [a, a + CHUNK_PAIRS])
         for b in range(first, last, CHUNK_PAIRS):
             pair = slice(b, min(b + CHUNK_PAIRS, last))
@@ -108,10 +108,7 @@ def fit_residuals(el: Elements, receivers: np.ndarray, deviations: np.ndarray) -
     at its points: the error the push makes there."""
     out = np.empty_like(deviations)
     for a in range(0, len(receivers), CHUNK_PAIRS):
-        part = receivers[a:a + CHUNK_PAIRS]
-        fit, centre, axes, mean = _quadratic_fits(el, part)
-        points, _ = patch_points(el.quads[part], 3)
-        basis = _basis(points, centre, axes) - mean[:, None, :]
+        fit, _, _, _, basis = _quadratic_fits(el, receivers[a:a + CHUNK_PAIRS])
         d = deviations[a:a + CHUNK_PAIRS]
         out[a:a + CHUNK_PAIRS] = d - np.einsum("mik,mk->mi", basis, np.einsum("mkj,mj->mk", fit, d))
     return out
@@ -120,7 +117,8 @@ def fit_residuals(el: Elements, receivers: np.ndarray, deviations: np.ndarray) -
 def _quadratic_fits(el: Elements, receivers: np.ndarray):
     """Per receiver: the (5, 9) map from deviations at its Gauss points to the coefficients of
     the zero-mean quadratic (xi, eta, xi^2, xi eta, eta^2) fitting them by weighted least
-    squares, and the frame (centre, in-plane axes over the element's size, the basis' mean)."""
+    squares, the frame (centre, in-plane axes over the element's size, the basis' mean), and
+    the zero-mean basis at its own points (9, 5)."""
     quads, normal = el.quads[receivers], el.normal[receivers]
     centre = el.centroid[receivers]
     edge = quads[:, 1] - quads[:, 0]
@@ -137,7 +135,7 @@ def _quadratic_fits(el: Elements, receivers: np.ndarray):
     normal_matrix = np.einsum("mik,mi,mil->mkl", basis, weights, basis)
     # pinv: a sliver's points lie near a line, and its quadratic across it is not determined
     fit = np.einsum("mkl,mil,mi->mki", np.linalg.pinv(normal_matrix, rcond=1e-10, hermitian=True), basis, weights)
-    return fit, centre, axes, mean
+    return fit, centre, axes, mean, basis
 
 
 def _basis(points: np.ndarray, centre: np.ndarray, axes: np.ndarray) -> np.ndarray:
